@@ -1,0 +1,169 @@
+"""The interface between drivefuzz and an automated-driving system (ADS) plugin.
+
+An ADS is a class registered in the entry-point group ``drivefuzz.ads``. The
+executor calls :meth:`ADS.reset` once with the mission and the road map, then
+:meth:`ADS.step` once per simulation step with an :class:`Observation`, and
+moves drivefuzz's car with the returned :class:`Control`. The ADS never touches
+SUMO: what it knows of the world is the observation (ground truth within the
+sensor horizon, plus the weather; its own sensing layer decides what it can
+really see).
+
+Observation and Control are plain frozen dataclasses, not pydantic models: they
+are built and read every step, on the hot path.
+"""
+
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass, field
+from importlib.metadata import entry_points
+from typing import Any, ClassVar, Mapping
+
+from pydantic import BaseModel, ConfigDict, ValidationError
+
+from drivefuzz.errors import InvalidConfig, PluginError
+
+ADS_GROUP = "drivefuzz.ads"
+
+#: Radius [m] of the ground truth handed to the ADS each step; the ADS's sensors see less.
+OBSERVATION_RADIUS = 150.0
+
+
+@dataclass(frozen=True, slots=True)
+class EgoState:
+    """The ego car as its own odometry and localisation report it. SI units, ENU radians."""
+
+    x: float  # [m] geometric centre
+    y: float
+    heading: float  # [rad]
+    speed: float  # [m/s]
+    vx: float  # [m/s] body frame
+    vy: float
+    yaw_rate: float  # [rad/s]
+    ax: float  # [m/s^2]
+    road_wheel_angle: float  # [rad]
+    length: float  # [m]
+    width: float  # [m]
+    wheelbase: float  # [m]
+
+
+@dataclass(frozen=True, slots=True)
+class ObjectState:
+    """One other road user (ground truth)."""
+
+    id: str
+    kind: str  # "vehicle" | "pedestrian"
+    x: float  # [m] geometric centre
+    y: float
+    heading: float  # [rad] ENU
+    speed: float  # [m/s]
+    length: float  # [m]
+    width: float  # [m]
+
+
+@dataclass(frozen=True, slots=True)
+class TrafficLightState:
+    """The next traffic light along the ego's route."""
+
+    tls_id: str
+    link_index: int
+    distance: float  # [m] from the front bumper to the stop line
+    state: str  # SUMO's signal character: r y G g s u o O
+
+
+@dataclass(frozen=True, slots=True)
+class Observation:
+    t: float  # [s]
+    ego: EgoState
+    lane: str  # SUMO lane id under the ego ("" off-road)
+    lane_pos: float  # [m] of the front bumper along ``lane``
+    speed_limit: float  # [m/s] of ``lane`` (nan off-road)
+    objects: tuple[ObjectState, ...]
+    traffic_light: TrafficLightState | None
+    weather: Any  # drivefuzz.scenario.Weather
+    sun_glare: bool = False  # the sun is low and ahead (camera blinded)
+
+
+@dataclass(frozen=True, slots=True)
+class Control:
+    """Commands for the car: steering left-positive as a fraction of full lock; pedals in [0, 1]."""
+
+    steer: float = 0.0
+    throttle: float = 0.0
+    brake: float = 0.0
+
+
+@dataclass(frozen=True)
+class MissionInfo:
+    """What the ADS is told at reset."""
+
+    start_lane: str
+    start_pos: float  # [m]
+    goal_edge: str
+    goal_pos: float  # [m]
+    goal_xy: tuple[float, float]  # [m]
+    route: tuple[str, ...]  # normal edges, as planned by drivefuzz (the ADS may plan its own)
+    step_length: float  # [s]
+    seed: int
+    extras: Mapping[str, Any] = field(default_factory=dict)
+
+
+class ADS(abc.ABC):
+    """Base class of ADS plugins.
+
+    Subclasses declare their options as a pydantic model in ``Options``; the
+    scenario's ``ads.options`` (and ``--ads-option K=V``) are validated against it.
+    """
+
+    name: ClassVar[str] = ""
+
+    class Options(BaseModel):
+        model_config = ConfigDict(extra="forbid")
+
+    def __init__(self, options: Mapping[str, Any] | None = None):
+        try:
+            self.options = self.Options.model_validate(dict(options or {}))
+        except ValidationError as exc:
+            err = exc.errors()[0]
+            loc = ".".join(str(p) for p in err["loc"])
+            fields = ", ".join(self.Options.model_fields) or "none"
+            raise InvalidConfig(f"--ads-option", f"{self.name or type(self).__name__}.{loc}", err["msg"],
+                                f"options: {fields}") from None
+
+    @abc.abstractmethod
+    def reset(self, mission: MissionInfo, roadmap) -> None:
+        """Called once before the first step. ``roadmap`` is a :class:`drivefuzz.roadmap.RoadMap`."""
+
+    @abc.abstractmethod
+    def step(self, obs: Observation) -> Control:
+        """Return the control for the next step."""
+
+    def done(self) -> bool:
+        """True once the ADS believes its mission is complete (used by the mission oracle)."""
+        return False
+
+    # An ADS that lets SUMO drive the ego (like the ``sumo`` plugin) overrides this to True;
+    # the executor then does not move the car and reads its state from SUMO instead.
+    sumo_driven: ClassVar[bool] = False
+
+    def vtype_settings(self) -> dict[str, float]:
+        """When ``sumo_driven``: vehicle settings (``accel``, ``tau``...) applied with libsumo's setters."""
+        return {}
+
+
+def available_ads() -> dict[str, Any]:
+    return {ep.name: ep for ep in entry_points(group=ADS_GROUP)}
+
+
+def load_ads(name: str, options: Mapping[str, Any] | None = None) -> ADS:
+    eps = available_ads()
+    if name not in eps:
+        raise InvalidConfig("--ads", None, f"no ADS plugin named {name!r}",
+                            ", ".join(sorted(eps)) or "none installed")
+    try:
+        cls = eps[name].load()
+    except Exception as exc:  # a broken plugin must not take the tool down with a traceback
+        raise PluginError(f"ADS plugin {name!r} failed to load: {type(exc).__name__}: {exc}") from exc
+    if not (isinstance(cls, type) and issubclass(cls, ADS)):
+        raise PluginError(f"ADS plugin {name!r} is not a drivefuzz.ads.ADS subclass")
+    return cls(options)

@@ -1,0 +1,606 @@
+"""Vehicle physics: a dynamic single-track (bicycle) model with friction-limited tyres.
+
+Every ADS under test drives the same simulated car; the executor calls
+:meth:`VehiclePhysics.step` once per simulation step and places the car in SUMO.
+
+Model
+-----
+* **Dynamic single-track model** in the body frame at the centre of gravity (CG):
+  states ``vx`` (forward), ``vy`` (left), ``yaw_rate`` (CCW), plus the pose and the
+  rate-limited front road-wheel angle.
+* **Lateral tyre force** per axle: simplified Pacejka magic formula
+  ``Fy = D sin(C atan(B a - E (B a - atan(B a))))`` with the peak ``D = mu * Fz``
+  (axle normal load ``Fz`` includes longitudinal load transfer).  The linear cornering
+  stiffness is specified *per unit normal load* (``tyre_stiffness_front/rear`` [1/rad],
+  ``C_alpha = k * Fz``) and ``B = k / (C * mu)``, so the small-slip behaviour does not
+  depend on friction while the saturation force and the slip angle at the peak scale
+  with ``mu`` -- on ice the tyres saturate early, on a dry road late.
+* **Longitudinal tyre force** (drive, brake) is demanded directly (an ideal
+  ABS / traction control, no wheel-spin states) and capped at
+  ``max_long_utilisation * mu * Fz`` per axle; brakes are distributed in proportion to
+  the axle loads (EBD).  **Combined slip** uses the friction ellipse:
+  the lateral force is scaled by ``sqrt(1 - (Fx / (mu Fz))^2)``.
+* **Resistances**: aerodynamic drag ``0.5 rho CdA vx^2`` and rolling resistance
+  ``c_rr m g``; with brakes they act as Coulomb-like resistances that can stop the car
+  but never reverse it (semi-implicit friction projection), so a braked car stops and
+  stays stopped.  Throttle only drives forward; there is no reverse gear.
+* **Integration**: fixed internal sub-steps ``h <= max_substep`` (``dt = 0.05`` ->
+  2 sub-steps of 25 ms).  The stiff lateral tyre dynamics (time constant ``~ m vx / C``
+  goes to zero as ``vx -> 0``) are integrated *linearly implicitly* (one Newton step of
+  implicit Euler with the tyre slopes clamped at >= 0), which is unconditionally stable;
+  longitudinal dynamics and the pose are semi-implicit Euler.
+* **Low speed**: below ``kinematic_blend_high`` (2 m/s) the lateral states are blended
+  towards the kinematic single-track model (``r = vx tan(delta) / L``,
+  ``vy = lr r``; the approach of the CommonRoad single-track drift model), fully
+  kinematic below ``kinematic_blend_low`` (1 m/s).  The pull towards the kinematic
+  state is limited by the available friction, so a slowly sliding car on ice keeps
+  sliding for a while instead of snapping onto its wheels.
+
+Why not the CommonRoad ``vehicle_dynamics_std`` itself: it needs wheel-spin states
+whose dynamics are very stiff (explicit steps <= 2 ms at low speed), and one evaluation
+of its right-hand side alone costs ~13 us in CPython, so a 0.05 s step costs
+0.3-2 ms (and ~0.7-2.2 ms with ``scipy.integrate.odeint`` as documented) against a
+budget of ~40 us.  This module is scalar pure-``math`` Python: ~10-15 us per 0.05 s step.
+
+Conventions: SI units, angles in rad; heading ENU (0 = east, CCW positive); body frame
+x forward, y left; steering left-positive.  The state's ``x, y`` is the *geometric
+centre* of the body rectangle (what :mod:`drivefuzz.geometry` uses), not the CG.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+__all__ = ["G", "VehicleParams", "VehicleState", "VehiclePhysics", "place_state"]
+
+G = 9.81  # [m/s^2]
+
+# Floor of the wheel-longitudinal speed in the slip-angle denominator [m/s].  The dynamic
+# model only carries weight above ``kinematic_blend_low`` (>= this), so it only matters
+# for a car sliding sideways (a spin), where it yields slip angles near +-90 deg.
+_V_SLIP_MIN = 0.5
+_MU_MIN = 0.01
+_MU_MAX = 2.0
+_TWO_PI = 2.0 * math.pi
+
+
+@dataclass(frozen=True)
+class VehicleParams:
+    """Parameters of the simulated car (a ~1.5 t mid-size rear-wheel-drive saloon)."""
+
+    length: float = 4.6  # [m] body
+    width: float = 1.9  # [m]
+    wheelbase: float = 2.8  # [m]
+    cg_to_front: float = 1.3  # [m] lf: CG to front axle; lr = wheelbase - lf
+    front_overhang: float = 0.95  # [m] front axle to front bumper
+    mass: float = 1500.0  # [kg]
+    yaw_inertia: float = 2500.0  # [kg m^2]
+    cg_height: float = 0.55  # [m]
+    steering_ratio: float = 15.0  # steering-wheel angle / road-wheel angle
+    max_road_wheel_angle: float = 0.6  # [rad] (~34 deg)
+    max_steer_rate: float = 0.8  # [rad/s] road-wheel angle rate limit (actuator)
+    max_drive_force: float = 6000.0  # [N] -> ~3.9 m/s^2 at low speed on a dry road
+    max_power: float = 110_000.0  # [W] limits the drive force above ~18 m/s
+    front_drive_fraction: float = 1.0  # share of the drive force on the front axle (1 = FWD)
+    max_brake_decel: float = 9.0  # [m/s^2] requested at brake=1 (grip may limit it)
+    max_long_utilisation_front: float = 0.9  # ABS/TC: max |Fx| / (mu Fz) on the front axle
+    max_long_utilisation_rear: float = 0.8  # rear kept further from the limit (EBD/ABS stability)
+    drag_area: float = 0.65  # [m^2] Cd * A
+    air_density: float = 1.2  # [kg/m^3]
+    rolling_resistance: float = 0.012  # c_rr (force = c_rr m g)
+    # Tyres (per axle, two tyres lumped): magic-formula lateral force.
+    tyre_stiffness_front: float = 16.0  # [1/rad] cornering stiffness per unit load C_af / Fzf
+    tyre_stiffness_rear: float = 26.0  # [1/rad] C_ar / Fzr (rear stiffer -> understeer)
+    tyre_shape_front: float = 1.4  # Pacejka C (large-slip force = sin(C pi/2) ~ 0.81 peak)
+    tyre_shape_rear: float = 1.4
+    lateral_grip_front: float = 0.9  # effective axle lateral friction / mu
+    lateral_grip_rear: float = 1.0
+    tyre_curvature_front: float = 0.0  # Pacejka E
+    tyre_curvature_rear: float = 0.0
+    # Numerics
+    max_substep: float = 0.025  # [s] internal integration step
+    kinematic_blend_low: float = 1.0  # [m/s] below: kinematic single-track model
+    kinematic_blend_high: float = 2.0  # [m/s] above: dynamic model
+
+    def __post_init__(self) -> None:
+        positive = (
+            "length", "width", "wheelbase", "cg_to_front", "mass", "yaw_inertia",
+            "steering_ratio", "max_road_wheel_angle", "max_steer_rate", "max_substep",
+            "tyre_stiffness_front", "tyre_stiffness_rear", "tyre_shape_front", "tyre_shape_rear",
+        )
+        for name in positive:
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"VehicleParams.{name} must be finite and > 0, got {v!r}")
+        nonneg = (
+            "front_overhang", "cg_height", "max_drive_force", "max_power", "max_brake_decel",
+            "drag_area", "air_density", "rolling_resistance", "kinematic_blend_low",
+        )
+        for name in nonneg:
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"VehicleParams.{name} must be finite and >= 0, got {v!r}")
+        if not self.cg_to_front < self.wheelbase:
+            raise ValueError("cg_to_front must be < wheelbase")
+        if self.rear_overhang < 0.0:
+            raise ValueError("wheelbase + front_overhang must not exceed length")
+        if not 0.0 <= self.front_drive_fraction <= 1.0:
+            raise ValueError("front_drive_fraction must be in [0, 1]")
+        for name in ("max_long_utilisation_front", "max_long_utilisation_rear"):
+            if not 0.0 < getattr(self, name) < 1.0:
+                raise ValueError(f"{name} must be in (0, 1)")
+        if not self.kinematic_blend_high > self.kinematic_blend_low:
+            raise ValueError("kinematic_blend_high must be > kinematic_blend_low")
+        if not self.max_road_wheel_angle < 1.4:
+            raise ValueError("max_road_wheel_angle must be < 1.4 rad")
+        for name in ("tyre_shape_front", "tyre_shape_rear"):
+            if not getattr(self, name) < 2.0:
+                raise ValueError(f"{name} (Pacejka C) must be < 2")
+        for name in ("tyre_curvature_front", "tyre_curvature_rear"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v < 1.0):
+                raise ValueError(f"{name} (Pacejka E) must be < 1")
+
+    # ---- geometry helpers -------------------------------------------------------------
+    @property
+    def cg_to_rear(self) -> float:
+        """lr [m]: CG to rear axle."""
+        return self.wheelbase - self.cg_to_front
+
+    @property
+    def rear_overhang(self) -> float:
+        """[m] rear bumper to rear axle."""
+        return self.length - self.wheelbase - self.front_overhang
+
+    @property
+    def centre_to_cg(self) -> float:
+        """[m] longitudinal offset of the CG from the geometric centre (+ = CG ahead)."""
+        return self.rear_overhang + self.cg_to_rear - 0.5 * self.length
+
+    @property
+    def centre_to_front_axle(self) -> float:
+        """[m] geometric centre to front axle (forward)."""
+        return self.centre_to_cg + self.cg_to_front
+
+    @property
+    def centre_to_rear_axle(self) -> float:
+        """[m] geometric centre to rear axle (backward, positive)."""
+        return self.cg_to_rear - self.centre_to_cg
+
+    # ---- linear tyre / handling helpers (static axle loads) ---------------------------
+    @property
+    def static_load_front(self) -> float:
+        return self.mass * G * self.cg_to_rear / self.wheelbase
+
+    @property
+    def static_load_rear(self) -> float:
+        return self.mass * G * self.cg_to_front / self.wheelbase
+
+    @property
+    def cornering_stiffness_front(self) -> float:
+        """[N/rad] linear cornering stiffness of the front axle at the static load."""
+        return self.tyre_stiffness_front * self.static_load_front
+
+    @property
+    def cornering_stiffness_rear(self) -> float:
+        """[N/rad] linear cornering stiffness of the rear axle at the static load."""
+        return self.tyre_stiffness_rear * self.static_load_rear
+
+    @property
+    def understeer_gradient(self) -> float:
+        """K_us [rad s^2/m] = m/L (lr/C_af - lf/C_ar); > 0 understeer."""
+        return self.mass / self.wheelbase * (
+            self.cg_to_rear / self.cornering_stiffness_front
+            - self.cg_to_front / self.cornering_stiffness_rear
+        )
+
+
+@dataclass(slots=True)
+class VehicleState:
+    x: float  # [m] geometric centre of the body rectangle
+    y: float
+    heading: float  # [rad] ENU, 0 = east, CCW positive
+    vx: float  # [m/s] body-frame velocity at the CG, forward
+    vy: float  # [m/s] body-frame velocity at the CG, left
+    yaw_rate: float  # [rad/s] CCW positive
+    road_wheel_angle: float  # [rad] front wheel angle, left positive
+    ax: float = 0.0  # [m/s^2] body-frame acceleration at the CG over the last step
+    ay: float = 0.0  # [m/s^2] lateral, includes the centripetal part vx * yaw_rate
+
+    @property
+    def speed(self) -> float:
+        return math.hypot(self.vx, self.vy)
+
+    @property
+    def sideslip(self) -> float:
+        """[rad] body sideslip angle at the CG (0 when stopped)."""
+        if self.vx == 0.0 and self.vy == 0.0:
+            return 0.0
+        return math.atan2(self.vy, self.vx)
+
+
+def place_state(x: float, y: float, heading: float, speed: float, params: VehicleParams) -> VehicleState:
+    """A state rolling straight ahead at ``speed`` [m/s] with the centre at ``(x, y)``."""
+    speed = float(speed)
+    if not math.isfinite(speed) or speed < 0.0:
+        raise ValueError(f"speed must be finite and >= 0, got {speed!r}")
+    return VehicleState(float(x), float(y), float(heading), speed, 0.0, 0.0, 0.0)
+
+
+def _clip01(v: float) -> float:
+    if v > 0.0:  # False for NaN
+        return 1.0 if v > 1.0 else float(v)
+    return 0.0
+
+
+class VehiclePhysics:
+    """Integrates the car; ``state`` is the only mutable data (it may be reassigned)."""
+
+    def __init__(self, params: VehicleParams, state: VehicleState):
+        self.params = params
+        self.state = state
+        p = params
+        self._m = p.mass
+        self._iz = p.yaw_inertia
+        self._lf = p.cg_to_front
+        self._lr = p.cg_to_rear
+        self._L = p.wheelbase
+        self._hcg = p.cg_height
+        self._mg = p.mass * G
+        self._dcg = p.centre_to_cg
+        self._kf = p.tyre_stiffness_front
+        self._kr = p.tyre_stiffness_rear
+        self._Cf = p.tyre_shape_front
+        self._Cr = p.tyre_shape_rear
+        self._Ef = p.tyre_curvature_front
+        self._Er = p.tyre_curvature_rear
+        self._drag = 0.5 * p.air_density * p.drag_area
+        self._rr = p.rolling_resistance * self._mg
+        # friction-limited pull towards the kinematic state: max |d vy| and |d r| per second per unit mu
+        self._kin_dvy = G
+        self._kin_dr = 2.0 * self._mg * self._lf * self._lr / (self._L * self._iz)
+        self._fz_min = 0.05 * self._mg
+
+    # ---- helpers ----------------------------------------------------------------------
+    def steering_wheel_angle(self) -> float:
+        """[rad] steering-wheel angle = road-wheel angle * steering ratio (left positive)."""
+        return self.state.road_wheel_angle * self.params.steering_ratio
+
+    def axle_positions(self) -> tuple[tuple[float, float], tuple[float, float]]:
+        """World ``(x, y)`` of the front and rear axle centres."""
+        s = self.state
+        c, sn = math.cos(s.heading), math.sin(s.heading)
+        df = self.params.centre_to_front_axle
+        dr = self.params.centre_to_rear_axle
+        return (s.x + df * c, s.y + df * sn), (s.x - dr * c, s.y - dr * sn)
+
+    def cg_position(self) -> tuple[float, float]:
+        s = self.state
+        d = self._dcg
+        return s.x + d * math.cos(s.heading), s.y + d * math.sin(s.heading)
+
+    @staticmethod
+    def steady_state_yaw_rate(params: VehicleParams, vx: float, road_wheel_angle: float) -> float:
+        """Linear single-track steady-state yaw rate ``vx d / (L + K_us vx^2)`` [rad/s]."""
+        return vx * road_wheel_angle / (params.wheelbase + params.understeer_gradient * vx * vx)
+
+    # ---- integration ------------------------------------------------------------------
+    def step(
+        self,
+        steer: float,
+        throttle: float,
+        brake: float,
+        dt: float,
+        mu_front: float = 1.0,
+        mu_rear: float = 1.0,
+        wind_force_lat: float = 0.0,
+    ) -> VehicleState:
+        """Advance by ``dt`` [s] and return the new state (a new object, also ``self.state``).
+
+        ``steer`` in [-1, 1] is the commanded fraction of ``max_road_wheel_angle`` (left
+        positive; the actuator is rate limited), ``throttle`` and ``brake`` in [0, 1];
+        inputs are clipped and NaN counts as 0.  ``mu_front``/``mu_rear`` is the friction
+        under each axle (clipped to [0.01, 2]); ``wind_force_lat`` [N] acts sideways at the CG
+        (left positive).
+        """
+        dt = float(dt)
+        if not (dt > 0.0 and dt < 1e6):
+            raise ValueError(f"dt must be > 0 and finite, got {dt!r}")
+        p = self.params
+        steer = float(steer)
+        if steer > 1.0:
+            steer = 1.0
+        elif steer < -1.0:
+            steer = -1.0
+        elif steer != steer:
+            steer = 0.0
+        throttle = _clip01(throttle)
+        brake = _clip01(brake)
+        muf = float(mu_front)
+        mur = float(mu_rear)
+        muf = _MU_MAX if muf > _MU_MAX else (muf if muf > _MU_MIN else _MU_MIN)  # NaN -> min
+        mur = _MU_MAX if mur > _MU_MAX else (mur if mur > _MU_MIN else _MU_MIN)
+        fw = float(wind_force_lat)
+        if not (-1e6 < fw < 1e6):
+            fw = 0.0 if fw != fw else math.copysign(1e6, fw)
+
+        m = self._m
+        iz = self._iz
+        lf = self._lf
+        lr = self._lr
+        L = self._L
+        hcg = self._hcg
+        mg = self._mg
+        fz_min = self._fz_min
+        fz_max = mg - fz_min
+        util_f = p.max_long_utilisation_front
+        util_r = p.max_long_utilisation_rear
+        Cf = self._Cf
+        Cr = self._Cr
+        Ef = self._Ef
+        Er = self._Er
+        gr_lat_f = p.lateral_grip_front
+        gr_lat = p.lateral_grip_rear
+        Bf = self._kf / (Cf * muf * gr_lat_f)
+        Br = self._kr / (Cr * mur * gr_lat)
+        drag = self._drag
+        rr = self._rr
+        dcg = self._dcg
+        fdf = p.front_drive_fraction
+        fmax = p.max_drive_force * throttle
+        pmax = p.max_power * throttle
+        fbrake = p.max_brake_decel * m * brake
+        v_lo = p.kinematic_blend_low
+        v_hi = p.kinematic_blend_high
+        v_span = v_hi - v_lo
+        mu_avg = 0.5 * (muf + mur)
+
+        n = int(math.ceil(dt / p.max_substep - 1e-9))
+        if n < 1:
+            n = 1
+        h = dt / n
+        kin_dvy = self._kin_dvy * mu_avg * h
+        kin_dr = self._kin_dr * mu_avg * h
+        d_target = steer * p.max_road_wheel_angle
+        d_rate = p.max_steer_rate * h
+
+        s = self.state
+        x = s.x
+        y = s.y
+        psi = s.heading
+        vx = s.vx
+        vy = s.vy
+        r = s.yaw_rate
+        delta = s.road_wheel_angle
+        ax = s.ax
+        vx0 = vx
+        vy0 = vy
+        sum_rvy = 0.0
+        sum_vxr = 0.0
+        atan = math.atan
+        sin = math.sin
+        cos = math.cos
+        sqrt = math.sqrt
+
+        for _ in range(n):
+            # -- steering actuator (rate limited)
+            if delta < d_target:
+                delta += d_rate
+                if delta > d_target:
+                    delta = d_target
+            elif delta > d_target:
+                delta -= d_rate
+                if delta < d_target:
+                    delta = d_target
+            cd = cos(delta)
+            sd = sin(delta)
+
+            # -- axle loads with longitudinal load transfer (from the last sub-step's ax)
+            fzf = (mg * lr - m * ax * hcg) / L
+            if fzf < fz_min:
+                fzf = fz_min
+            elif fzf > fz_max:
+                fzf = fz_max
+            fzr = mg - fzf
+            capf = muf * fzf  # peak tyre force per axle (friction-ellipse radius)
+            capr = mur * fzr
+
+            # -- blend weight dynamic / kinematic
+            v = math.hypot(vx, vy)
+            if v >= v_hi:
+                w = 1.0
+            elif v <= v_lo:
+                w = 0.0
+            else:
+                t = (v - v_lo) / v_span
+                w = t * t * (3.0 - 2.0 * t)
+
+            # -- rear lateral force (lateral priority on the rear axle: the rear brakes /
+            #    traction only get the friction the lateral force leaves, as EBD/ABS keep
+            #    the rear stable; the front is longitudinal-priority, see below)
+            if w > 0.0:
+                vlat_r = vy - lr * r
+                Vr = vx if vx > 0.0 else -vx
+                if Vr < _V_SLIP_MIN:
+                    Vr = _V_SLIP_MIN
+                xb = -Br * atan(vlat_r / Vr)  # B * slip angle
+                if Er == 0.0:
+                    u = xb
+                    du = Br
+                else:
+                    u = xb - Er * (xb - atan(xb))
+                    du = Br * (1.0 - Er + Er / (1.0 + xb * xb))
+                phi = Cr * atan(u)
+                Dr = gr_lat * capr
+                fyr = Dr * sin(phi)
+                kr = Dr * Cr * cos(phi) * du / (1.0 + u * u)
+                if kr < 0.0:
+                    kr = 0.0
+                left = capr * capr - fyr * fyr
+                lim_r = util_r * sqrt(left) if left > 0.0 else 0.0
+            else:
+                fyr = 0.0
+                lim_r = util_r * capr
+            lim_f = util_f * capf
+
+            # -- longitudinal tyre forces (wheel frame, + = forward): drive and EBD brakes
+            if fmax > 0.0:
+                fd = pmax / vx if vx > 1.0 else pmax
+                if fd > fmax:
+                    fd = fmax
+            else:
+                fd = 0.0
+            dfa = fd * fdf
+            dra = fd - dfa
+            bfa = fbrake * fzf / mg
+            bra = fbrake - bfa
+            if vx >= 0.0:
+                nf = dfa - bfa
+                if nf > lim_f:
+                    nf = lim_f
+                elif nf < -lim_f:
+                    nf = -lim_f
+                nr = dra - bra
+                if nr > lim_r:
+                    nr = lim_r
+                elif nr < -lim_r:
+                    nr = -lim_r
+                fxf = nf  # signed force along the wheel
+                if nf >= 0.0:
+                    pf, qf = nf, 0.0
+                else:
+                    pf, qf = 0.0, -nf
+                if nr >= 0.0:
+                    pr_, qr = nr, 0.0
+                else:
+                    pr_, qr = 0.0, -nr
+            else:  # rolling backwards (only after a spin): drive and brakes both push forward
+                pf = dfa if dfa < lim_f else lim_f
+                qf = bfa if bfa < lim_f - pf else lim_f - pf
+                pr_ = dra if dra < lim_r else lim_r
+                qr = bra if bra < lim_r - pr_ else lim_r - pr_
+                fxf = pf + qf
+
+            fyf = 0.0
+            if w > 0.0:
+                # front slip angle (wheel frame; valid for any direction of travel)
+                vyf = vy + lf * r
+                vlong_f = vx * cd + vyf * sd
+                vlat_f = vyf * cd - vx * sd
+                Vf = vlong_f if vlong_f > 0.0 else -vlong_f
+                if Vf < _V_SLIP_MIN:
+                    Vf = _V_SLIP_MIN
+                # friction ellipse: the lateral capacity the longitudinal force leaves
+                uf = fxf / capf
+                Df = gr_lat_f * capf * sqrt(1.0 - uf * uf)
+                xb = -Bf * atan(vlat_f / Vf)
+                if Ef == 0.0:
+                    u = xb
+                    du = Bf
+                else:
+                    u = xb - Ef * (xb - atan(xb))
+                    du = Bf * (1.0 - Ef + Ef / (1.0 + xb * xb))
+                phi = Cf * atan(u)
+                fyf = Df * sin(phi)
+                kf = Df * Cf * cos(phi) * du / (1.0 + u * u)
+                if kf < 0.0:
+                    kf = 0.0
+                # lateral / yaw right-hand side (front forces in the body frame)
+                fyf_b = fyf * cd + fxf * sd
+                f1 = (fyf_b + fyr + fw) / m - vx * r
+                f2 = (lf * fyf_b - lr * fyr) / iz
+                # linearised tyre forces: d alpha / d vy (approximate, ignores d|vlong|)
+                gf = -cd * Vf / (Vf * Vf + vlat_f * vlat_f) * kf * cd
+                gr = -Vr / (Vr * Vr + vlat_r * vlat_r) * kr
+                j11 = (gf + gr) / m
+                j12 = (gf * lf - gr * lr) / m - vx
+                j21 = (lf * gf - lr * gr) / iz
+                j22 = (lf * lf * gf + lr * lr * gr) / iz
+                a11 = 1.0 - h * j11
+                a12 = -h * j12
+                a21 = -h * j21
+                a22 = 1.0 - h * j22
+                det = a11 * a22 - a12 * a21
+                if det > 0.05:
+                    dvy = h * (a22 * f1 - a12 * f2) / det
+                    dr = h * (a11 * f2 - a21 * f1) / det
+                else:  # (near-)singular linearisation: explicit Euler
+                    dvy = h * f1
+                    dr = h * f2
+                vy_d = vy + dvy
+                r_d = r + dr
+
+            # -- longitudinal: propulsion then no-overshoot resistances
+            a_n = (pf * cd + pr_) / m
+            if w > 0.0:
+                a_n += w * (r * vy - fyf * sd / m)
+            a_res = (qf * cd + qr + drag * vx * vx + rr) / m
+            v1 = vx + h * a_n
+            if v1 > 0.0:
+                vx_new = v1 - h * a_res
+                if vx_new < 0.0:
+                    vx_new = 0.0
+            else:
+                vx_new = v1 + h * a_res
+                if vx_new > 0.0:
+                    vx_new = 0.0
+
+            # -- lateral: kinematic (friction-limited) and blend
+            if w < 1.0:
+                r_k = vx_new * sd / (cd * L)
+                dk = r_k * lr - vy
+                if dk > kin_dvy:
+                    dk = kin_dvy
+                elif dk < -kin_dvy:
+                    dk = -kin_dvy
+                vy_k = vy + dk
+                dk = r_k - r
+                if dk > kin_dr:
+                    dk = kin_dr
+                elif dk < -kin_dr:
+                    dk = -kin_dr
+                r_k = r + dk
+                if w > 0.0:
+                    vy_new = w * vy_d + (1.0 - w) * vy_k
+                    r_new = w * r_d + (1.0 - w) * r_k
+                else:
+                    vy_new = vy_k
+                    r_new = r_k
+            else:
+                vy_new = vy_d
+                r_new = r_d
+
+            ax = (vx_new - vx) / h - r_new * vy_new
+            if ax > 20.0:  # only feeds the load transfer
+                ax = 20.0
+            elif ax < -20.0:
+                ax = -20.0
+            vx = vx_new
+            vy = vy_new
+            r = r_new
+            sum_rvy += r * vy
+            sum_vxr += vx * r
+
+            # -- pose of the geometric centre (semi-implicit, mid-point heading)
+            if r != 0.0:
+                psi_mid = psi + 0.5 * h * r
+                psi += h * r
+            else:
+                psi_mid = psi
+            if vx != 0.0 or vy != 0.0:
+                c = cos(psi_mid)
+                sn = sin(psi_mid)
+                vcy = vy - dcg * r
+                x += h * (vx * c - vcy * sn)
+                y += h * (vx * sn + vcy * c)
+
+        if psi > math.pi or psi < -math.pi:
+            psi = math.remainder(psi, _TWO_PI)
+        new = VehicleState(
+            x, y, psi, vx, vy, r, delta,
+            (vx - vx0) / dt - sum_rvy / n,
+            (vy - vy0) / dt + sum_vxr / n,
+        )
+        self.state = new
+        return new

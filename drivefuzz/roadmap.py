@@ -1,0 +1,238 @@
+"""The road network as drivefuzz sees it outside SUMO: lanes, routes, geometry.
+
+Built on sumolib; used by scenario validation, seeds, the mutator, ADS plugins
+and oracles (none of which may import libsumo). Loaded networks are cached per
+process, because a campaign loads the same network thousands of times.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+import xml.sax
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import drivefuzz  # noqa: F401  (sets SUMO_HOME)
+from drivefuzz.errors import InvalidNetwork
+
+PASSENGER = "passenger"
+PEDESTRIAN = "pedestrian"
+
+
+@dataclass(frozen=True)
+class LaneGeom:
+    """A lane's centre line as arrays, for fast projection."""
+
+    id: str
+    edge: str
+    index: int
+    length: float  # [m] SUMO's lane length (may differ slightly from the polyline's)
+    width: float  # [m]
+    speed: float  # [m/s] limit
+    pts: np.ndarray  # (n, 2) polyline
+    cum: np.ndarray  # (n,) arc length at each point [m]
+
+    def position(self, pos: float) -> tuple[float, float, float]:
+        """(x, y, heading [rad ENU]) at ``pos`` metres along the lane (scaled to the polyline)."""
+        s = min(max(pos, 0.0), self.length) * (self.cum[-1] / self.length if self.length > 0 else 1.0)
+        i = int(np.searchsorted(self.cum, s, side="right") - 1)
+        i = min(max(i, 0), len(self.pts) - 2)
+        seg = self.pts[i + 1] - self.pts[i]
+        seglen = float(np.hypot(*seg)) or 1e-9
+        f = (s - self.cum[i]) / seglen
+        x, y = self.pts[i] + f * seg
+        return float(x), float(y), math.atan2(seg[1], seg[0])
+
+    def project(self, x: float, y: float) -> tuple[float, float]:
+        """(pos along lane [m, SUMO scale], signed lateral offset [m, left positive])."""
+        p = self.pts
+        d = p[1:] - p[:-1]
+        l2 = np.maximum((d * d).sum(1), 1e-12)
+        t = np.clip(((x - p[:-1, 0]) * d[:, 0] + (y - p[:-1, 1]) * d[:, 1]) / l2, 0.0, 1.0)
+        qx = p[:-1, 0] + t * d[:, 0]
+        qy = p[:-1, 1] + t * d[:, 1]
+        dist2 = (x - qx) ** 2 + (y - qy) ** 2
+        i = int(np.argmin(dist2))
+        s = self.cum[i] + t[i] * math.sqrt(l2[i])
+        cross = d[i, 0] * (y - p[i, 1]) - d[i, 1] * (x - p[i, 0])
+        lat = math.copysign(math.sqrt(dist2[i]), cross)
+        scale = self.length / self.cum[-1] if self.cum[-1] > 0 else 1.0
+        return float(s * scale), float(lat)
+
+
+class RoadMap:
+    """Read-only view of a SUMO network."""
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        if not self.path.is_file():
+            raise InvalidNetwork(str(path), None, "no such network file", "a SUMO .net.xml file")
+        import sumolib
+
+        try:
+            self.net = sumolib.net.readNet(str(self.path), withInternal=True, withPedestrianConnections=True)
+        except (xml.sax.SAXException, ValueError, KeyError, AttributeError, IndexError, TypeError) as exc:
+            raise InvalidNetwork(str(path), None, f"not a readable SUMO network ({type(exc).__name__}: {exc})",
+                                 "a .net.xml written by netconvert") from None
+        if not self.net.getEdges(withInternal=False):
+            raise InvalidNetwork(str(path), None, "the network has no edges", "a .net.xml with roads")
+        self._geoms: dict[str, LaneGeom] = {}
+        self._route_cache: dict[tuple[str, str, str], tuple[str, ...] | None] = {}
+
+    # ----------------------------------------------------------- look-ups
+    @property
+    def name(self) -> str:
+        n = self.path.name
+        return n[: -len(".net.xml")] if n.endswith(".net.xml") else self.path.stem
+
+    def has_edge(self, edge_id: str) -> bool:
+        return self.net.hasEdge(edge_id)
+
+    def has_lane(self, lane_id: str) -> bool:
+        try:
+            self.net.getLane(lane_id)
+            return True
+        except (KeyError, ValueError, IndexError):
+            return False
+
+    def lane(self, lane_id: str):
+        return self.net.getLane(lane_id)
+
+    def edge(self, edge_id: str):
+        return self.net.getEdge(edge_id)
+
+    def geom(self, lane_id: str) -> LaneGeom:
+        g = self._geoms.get(lane_id)
+        if g is None:
+            lane = self.net.getLane(lane_id)
+            pts = np.asarray(lane.getShape(), dtype=float)[:, :2]
+            if len(pts) < 2:
+                pts = np.vstack([pts, pts + 1e-3])
+            seg = np.hypot(*(pts[1:] - pts[:-1]).T)
+            cum = np.concatenate([[0.0], np.cumsum(seg)])
+            g = LaneGeom(lane_id, lane.getEdge().getID(), lane.getIndex(), float(lane.getLength()),
+                         float(lane.getWidth()), float(lane.getSpeed()), pts, cum)
+            self._geoms[lane_id] = g
+        return g
+
+    def is_normal_edge(self, edge) -> bool:
+        return edge.getFunction() == ""
+
+    def edge_ids(self, vclass: str = PASSENGER) -> list[str]:
+        """Normal edges with at least one lane allowing ``vclass``."""
+        return sorted(e.getID() for e in self.net.getEdges(withInternal=False)
+                      if e.getFunction() == "" and any(l.allows(vclass) for l in e.getLanes()))
+
+    def lanes(self, vclass: str = PASSENGER, *, exclusive_for: str | None = None) -> list[str]:
+        """Lanes of normal edges allowing ``vclass`` (sorted ids).
+
+        ``exclusive_for=PEDESTRIAN`` keeps sidewalks only (lanes that allow no passenger car).
+        """
+        out = []
+        for e in self.net.getEdges(withInternal=False):
+            if e.getFunction() != "":
+                continue
+            for lane in e.getLanes():
+                if not lane.allows(vclass):
+                    continue
+                if exclusive_for == PEDESTRIAN and lane.allows(PASSENGER):
+                    continue
+                out.append(lane.getID())
+        return sorted(out)
+
+    def drive_lane(self, edge_id: str) -> str:
+        """The rightmost lane of ``edge_id`` that allows passenger cars (goals are placed on it)."""
+        for lane in self.edge(edge_id).getLanes():
+            if lane.allows(PASSENGER):
+                return lane.getID()
+        return self.edge(edge_id).getLanes()[0].getID()
+
+    def walkable_lanes(self) -> list[str]:
+        """Lanes a pedestrian may stand on: sidewalks and crossings (or shared road lanes)."""
+        out = []
+        for e in self.net.getEdges(withInternal=True):
+            if e.getFunction() not in ("", "crossing"):
+                continue
+            out.extend(l.getID() for l in e.getLanes() if l.allows(PEDESTRIAN))
+        return sorted(out)
+
+    # ------------------------------------------------------------- routes
+    def route(self, from_edge: str, to_edge: str, vclass: str = PASSENGER) -> tuple[str, ...] | None:
+        """Shortest route of normal edges, or None if there is none."""
+        key = (from_edge, to_edge, vclass)
+        if key not in self._route_cache:
+            if from_edge == to_edge:
+                self._route_cache[key] = (from_edge,)
+            else:
+                try:
+                    path, _cost = self.net.getShortestPath(self.edge(from_edge), self.edge(to_edge), vClass=vclass)
+                except KeyError:
+                    path = None
+                self._route_cache[key] = tuple(e.getID() for e in path) if path else None
+        return self._route_cache[key]
+
+    def route_length(self, edges: tuple[str, ...], start_pos: float = 0.0, end_pos: float | None = None) -> float:
+        total = sum(self.edge(e).getLength() for e in edges)
+        last = self.edge(edges[-1]).getLength()
+        return total - start_pos - (last - (last if end_pos is None else end_pos))
+
+    def connections(self, from_edge: str, to_edge: str) -> list[tuple[str, str, str]]:
+        """(from lane, to lane, via internal lane or '') for every connection from_edge -> to_edge."""
+        out = []
+        src, dst = self.edge(from_edge), self.edge(to_edge)
+        for conn in src.getConnections(dst):
+            via = conn.getViaLaneID() or ""
+            out.append((conn.getFromLane().getID(), conn.getToLane().getID(), via))
+        return out
+
+    def internal_chain(self, via: str) -> list[str]:
+        """The internal lanes of a junction passage starting with ``via`` (SUMO may split them)."""
+        chain = []
+        lane_id = via
+        seen = set()
+        while lane_id and lane_id not in seen:
+            seen.add(lane_id)
+            chain.append(lane_id)
+            lane = self.net.getLane(lane_id)
+            nxt = ""
+            for conn in lane.getOutgoing():
+                to = conn.getToLane()
+                if to.getEdge().getFunction() == "internal":
+                    nxt = to.getID()
+                break
+            lane_id = nxt
+        return chain
+
+    def nearest_lane(self, x: float, y: float, radius: float = 5.0, vclass: str | None = None) -> tuple[str, float] | None:
+        """(lane id, distance [m]) of the nearest lane within ``radius``, optionally allowing ``vclass``."""
+        best = None
+        for lane, dist in self.net.getNeighboringLanes(x, y, radius, includeJunctions=True):
+            if vclass is not None and not lane.allows(vclass):
+                continue
+            if best is None or dist < best[1]:
+                best = (lane.getID(), float(dist))
+        return best
+
+    def tls_ids(self) -> list[str]:
+        return sorted(t.getID() for t in self.net.getTrafficLights())
+
+    def bounds(self) -> tuple[float, float, float, float]:
+        (x0, y0), (x1, y1) = self.net.getBBoxXY()
+        return float(x0), float(y0), float(x1), float(y1)
+
+
+@functools.lru_cache(maxsize=16)
+def _load(path: str, mtime: float) -> RoadMap:
+    return RoadMap(path)
+
+
+def load_roadmap(path: str | os.PathLike) -> RoadMap:
+    """Cached :class:`RoadMap` (re-read when the file changes)."""
+    p = Path(path).resolve()
+    if not p.is_file():
+        raise InvalidNetwork(str(path), None, "no such network file", "a SUMO .net.xml file")
+    return _load(str(p), p.stat().st_mtime)

@@ -1,0 +1,184 @@
+"""The Scenario: everything one execution needs, as validated pydantic models.
+
+A scenario is the unit the mutator rewrites, the executor runs and a finding
+stores. It is written as SUMO files by :mod:`drivefuzz.sumofiles` (actors in a
+route file, puddles and weather in an additional file, the rest in a small JSON
+manifest) and read back losslessly.
+
+Units: SI (m, s, m/s) and radians, except where a name says otherwise
+(weather aspects are the paper's 0-100 scales; sun angles are in degrees).
+Positions along a lane are SUMO's: metres from the lane start to the vehicle's
+front bumper.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from enum import Enum
+from pathlib import Path
+from typing import Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+
+SCHEMA_VERSION = 1
+
+OptionValue = Union[bool, int, float, str]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, use_enum_values=False)
+
+
+class ActorKind(str, Enum):
+    VEHICLE = "vehicle"
+    PEDESTRIAN = "pedestrian"
+
+
+class NavType(str, Enum):
+    """DriveFuzz's four navigation types."""
+
+    AUTOPILOT = "autopilot"  # lawful SUMO driver or walker to its destination
+    MANEUVER = "maneuver"  # timed sequence of speed and lane-change actions
+    LINEAR = "linear"  # ignores every rule: constant speed straight to its destination
+    IMMOBILE = "immobile"  # stands still where it was placed
+
+
+class ManeuverAction(str, Enum):
+    SPEED = "speed"  # set the target speed to ``value`` [m/s]
+    LANE_LEFT = "lane_left"  # change one lane to the left, taking ``value`` [s]
+    LANE_RIGHT = "lane_right"  # change one lane to the right, taking ``value`` [s]
+
+
+class Maneuver(_Model):
+    time: float = Field(ge=0.0, description="[s] after the actor departs")
+    action: ManeuverAction
+    value: float = Field(ge=0.0, description="[m/s] for speed, [s] duration for lane changes")
+
+
+class Mission(_Model):
+    start_lane: str = Field(min_length=1, description="SUMO lane id the ego starts on")
+    start_pos: float = Field(ge=0.0, description="[m] of the front bumper along start_lane")
+    goal_edge: str = Field(min_length=1)
+    goal_pos: float = Field(ge=0.0, description="[m] along goal_edge")
+    start_speed: float = Field(default=0.0, ge=0.0, description="[m/s]")
+
+    @property
+    def start_edge(self) -> str:
+        return lane_edge(self.start_lane)
+
+
+class Actor(_Model):
+    id: str = Field(pattern=r"^[A-Za-z0-9_.\-]+$")
+    kind: ActorKind
+    nav: NavType
+    start_lane: str = Field(min_length=1)
+    start_pos: float = Field(ge=0.0, description="[m] along start_lane")
+    speed: float = Field(ge=0.0, description="[m/s] target speed")
+    depart: float = Field(default=0.0, ge=0.0, description="[s]")
+    dest_edge: str | None = Field(default=None, description="autopilot/maneuver/linear vehicles: destination edge")
+    dest_pos: float | None = Field(default=None, ge=0.0, description="[m] along dest_edge")
+    dest_xy: tuple[float, float] | None = Field(default=None, description="linear pedestrians: straight-line target [m]")
+    maneuvers: tuple[Maneuver, ...] = ()
+
+    @property
+    def start_edge(self) -> str:
+        return lane_edge(self.start_lane)
+
+    @model_validator(mode="after")
+    def _nav_fields(self) -> "Actor":
+        if self.nav is NavType.MANEUVER and self.kind is ActorKind.PEDESTRIAN:
+            raise ValueError("maneuver actors must be vehicles")
+        if self.maneuvers and self.nav is not NavType.MANEUVER:
+            raise ValueError("only maneuver actors carry maneuvers")
+        if self.kind is ActorKind.PEDESTRIAN and self.nav is NavType.LINEAR and self.dest_xy is None:
+            raise ValueError("a linear pedestrian needs dest_xy")
+        if self.nav is not NavType.IMMOBILE and self.dest_edge is None and self.dest_xy is None:
+            raise ValueError(f"a {self.nav.value} actor needs dest_edge")
+        return self
+
+
+class Puddle(_Model):
+    """A reduced-friction area: an oriented rectangle."""
+
+    x: float = Field(description="[m] centre")
+    y: float = Field(description="[m] centre")
+    length: float = Field(gt=0.0, description="[m] along the rotated x axis")
+    width: float = Field(gt=0.0, description="[m]")
+    rotation: float = Field(default=0.0, description="[rad] ENU, counter-clockwise")
+    friction: float = Field(gt=0.0, le=2.0, description="coefficient mu in (0, 2]")
+
+
+class Weather(_Model):
+    """DriveFuzz's eight weather aspects (CARLA's scales)."""
+
+    cloud: float = Field(default=0.0, ge=0.0, le=100.0)
+    rain: float = Field(default=0.0, ge=0.0, le=100.0)
+    wind: float = Field(default=0.0, ge=0.0, le=100.0)
+    fog: float = Field(default=0.0, ge=0.0, le=100.0)
+    wetness: float = Field(default=0.0, ge=0.0, le=100.0)
+    puddle_density: float = Field(default=0.0, ge=0.0, le=100.0)
+    sun_azimuth_deg: float = Field(default=0.0, ge=0.0, le=360.0, description="compass, 0 = north, clockwise")
+    sun_altitude_deg: float = Field(default=90.0, ge=-90.0, le=90.0)
+
+
+class AdsSpec(_Model):
+    name: str = "ego"
+    options: dict[str, OptionValue] = Field(default_factory=dict)
+
+
+class SimOptions(_Model):
+    step_length: float = Field(default=0.05, gt=0.0, le=1.0, description="[s]")
+    time_limit: float = Field(default=60.0, gt=0.0, description="[s] simulated")
+
+
+class Scenario(_Model):
+    """One driving scenario: a network, a mission, and what the fuzzer put around it."""
+
+    network: str = Field(description="path of the .net.xml (absolute, or relative to the manifest)")
+    mission: Mission
+    actors: tuple[Actor, ...] = ()
+    puddles: tuple[Puddle, ...] = ()
+    weather: Weather = Weather()
+    ads: AdsSpec = AdsSpec()
+    seed: int = Field(default=0, ge=0)
+    sim: SimOptions = SimOptions()
+    name: str = "scenario"
+
+    @field_validator("actors")
+    @classmethod
+    def _unique_ids(cls, actors: tuple[Actor, ...]) -> tuple[Actor, ...]:
+        ids = [a.id for a in actors]
+        dup = {i for i in ids if ids.count(i) > 1}
+        if dup:
+            raise ValueError(f"duplicate actor ids {sorted(dup)}")
+        if "ego" in ids:
+            raise ValueError("actor id 'ego' is reserved for the ego vehicle")
+        return actors
+
+    def network_path(self, base: str | Path | None = None) -> Path:
+        p = Path(self.network)
+        if not p.is_absolute() and base is not None:
+            p = Path(base) / p
+        return p
+
+    def content_hash(self) -> str:
+        """Stable short hash of everything that decides the execution (the network by name)."""
+        data = self.model_dump(mode="json")
+        data["network"] = Path(self.network).name
+        data.pop("name", None)
+        blob = json.dumps(data, sort_keys=True, separators=(",", ":")).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def lane_edge(lane_id: str) -> str:
+    """Edge id of a SUMO lane id (``edge_index``)."""
+    edge, sep, index = lane_id.rpartition("_")
+    return edge if sep and index.isdigit() else lane_id
+
+
+def lane_index(lane_id: str) -> int:
+    return int(lane_id.rpartition("_")[2])
+
+
+Kind = Literal["vehicle", "pedestrian"]

@@ -1,0 +1,384 @@
+"""Scenario <-> SUMO files, losslessly.
+
+A scenario folder holds what ``sumo``/``sumo-gui`` load as they are::
+
+    scenario.json     manifest: network, ADS, seed, simulation options (what SUMO has no element for)
+    routes.rou.xml    the ego (id "ego") and every actor, sorted by depart time
+    fuzz.add.xml      puddles as polygons (+ friction steps on the lanes under them), weather as a POI
+    scenario.sumocfg  ties them together: ``sumo-gui -c scenario.sumocfg``
+
+Behaviour SUMO's XML cannot express (navigation type, maneuver schedule,
+jaywalking target, exact model values) travels in ``<param key="drivefuzz.*">``.
+Floats are written with ``repr`` so that reading gives back the same numbers.
+Additional files carry no schema header and must be loaded with ``-X never``:
+``friction`` on a ``<step>`` is not in SUMO's XSD.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+from pydantic import ValidationError
+
+from drivefuzz.errors import InvalidScenario
+from drivefuzz.scenario import (
+    SCHEMA_VERSION,
+    Actor,
+    ActorKind,
+    AdsSpec,
+    Maneuver,
+    Mission,
+    NavType,
+    Puddle,
+    Scenario,
+    SimOptions,
+    Weather,
+    lane_edge,
+    lane_index,
+)
+from drivefuzz.storage import atomic_write_text
+
+MANIFEST = "scenario.json"
+ROUTES = "routes.rou.xml"
+ADDITIONAL = "fuzz.add.xml"
+SUMOCFG = "scenario.sumocfg"
+
+EGO_ID = "ego"
+EGO_TYPE = "drivefuzz_ego"
+#: vType per (kind, navigation type); attributes from the SUMO notes (lawful, reckless, walker).
+VTYPES: dict[str, dict[str, str]] = {
+    EGO_TYPE: {"vClass": "passenger", "color": "1,0,0", "speedFactor": "1", "speedDev": "0", "sigma": "0"},
+    "drivefuzz_lawful": {"vClass": "passenger", "color": "0.8,0.8,0.8", "sigma": "0", "speedFactor": "1",
+                         "speedDev": "0", "impatience": "0"},
+    "drivefuzz_maneuver": {"vClass": "passenger", "color": "1,0.6,0", "sigma": "0", "speedFactor": "1",
+                           "speedDev": "0", "impatience": "0"},
+    "drivefuzz_linear": {"vClass": "passenger", "color": "1,0,1", "sigma": "0", "speedFactor": "1.3",
+                         "speedDev": "0", "minGap": "0.5", "tau": "0.5", "jmDriveAfterRedTime": "3600",
+                         "jmDriveRedSpeed": "20", "jmIgnoreFoeProb": "1", "jmIgnoreFoeSpeed": "50",
+                         "jmIgnoreJunctionFoeProb": "1", "jmTimegapMinor": "0", "lcAssertive": "10",
+                         "lcCooperative": "0"},
+    "drivefuzz_immobile": {"vClass": "passenger", "color": "0.4,0.4,0.4", "sigma": "0"},
+    "drivefuzz_walker": {"vClass": "pedestrian", "color": "0,0.6,0", "speedDev": "0"},
+    "drivefuzz_walker_linear": {"vClass": "pedestrian", "color": "1,0,1", "speedDev": "0",
+                                "jmDriveAfterRedTime": "3600", "jmIgnoreFoeProb": "1", "jmIgnoreFoeSpeed": "50"},
+}
+
+
+def actor_vtype(actor: Actor) -> str:
+    if actor.kind is ActorKind.PEDESTRIAN:
+        return "drivefuzz_walker_linear" if actor.nav is NavType.LINEAR else "drivefuzz_walker"
+    return {
+        NavType.AUTOPILOT: "drivefuzz_lawful",
+        NavType.MANEUVER: "drivefuzz_maneuver",
+        NavType.LINEAR: "drivefuzz_linear",
+        NavType.IMMOBILE: "drivefuzz_immobile",
+    }[actor.nav]
+
+
+def _f(x: float) -> str:
+    return repr(float(x))
+
+
+def _param(parent: ET.Element, key: str, value: Any) -> None:
+    ET.SubElement(parent, "param", key=key, value=str(value))
+
+
+def _params(elem: ET.Element) -> dict[str, str]:
+    return {p.get("key"): p.get("value") for p in elem.findall("param")}
+
+
+def puddle_corners(p: Puddle) -> list[tuple[float, float]]:
+    c, s = math.cos(p.rotation), math.sin(p.rotation)
+    out = []
+    for dx, dy in ((0.5, 0.5), (-0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)):
+        lx, ly = dx * p.length, dy * p.width
+        out.append((p.x + c * lx - s * ly, p.y + s * lx + c * ly))
+    return out
+
+
+# ---------------------------------------------------------------- writing
+def routes_xml(scenario: Scenario, route_edges: tuple[str, ...], ego=None) -> str:
+    """The route file; ``ego`` is the physics' VehicleParams (for the ego vType's size)."""
+    if ego is None:
+        from drivefuzz.physics import VehicleParams
+
+        ego = VehicleParams()
+    root = ET.Element("routes")
+    for vid, attrs in VTYPES.items():
+        vt = ET.SubElement(root, "vType", id=vid, **attrs)
+        if vid == EGO_TYPE:
+            vt.set("length", _f(ego.length))
+            vt.set("width", _f(ego.width))
+            vt.set("minGap", "1.0")
+    m = scenario.mission
+    ego_el = ET.Element("vehicle", id=EGO_ID, type=EGO_TYPE, depart="0.00",
+                        departLane=str(lane_index(m.start_lane)), departPos=_f(m.start_pos),
+                        departSpeed=_f(m.start_speed), arrivalPos=_f(m.goal_pos))
+    ET.SubElement(ego_el, "route", edges=" ".join(route_edges))
+    _param(ego_el, "drivefuzz.role", "ego")
+    entries: list[tuple[float, int, ET.Element]] = [(0.0, -1, ego_el)]
+    for order, actor in enumerate(scenario.actors):
+        entries.append((actor.depart, order, _actor_element(actor)))
+    # SUMO drops route entries that are out of depart order: sort (stable, ego first at t=0).
+    entries.sort(key=lambda e: (e[0], e[1]))
+    for _, _, el in entries:
+        root.append(el)
+    ET.indent(root)
+    return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def _actor_element(a: Actor) -> ET.Element:
+    vtype = actor_vtype(a)
+    depart = _f(a.depart)
+    if a.kind is ActorKind.VEHICLE:
+        dest = a.dest_edge or a.start_edge
+        el = ET.Element("trip", id=a.id, type=vtype, depart=depart, departLane=str(lane_index(a.start_lane)),
+                        departPos=_f(a.start_pos), departSpeed="0" if a.nav is NavType.IMMOBILE else "max",
+                        to=dest, **{"from": a.start_edge})
+        if a.dest_pos is not None:
+            el.set("arrivalPos", _f(a.dest_pos))
+        if a.nav is NavType.IMMOBILE:
+            ET.SubElement(el, "stop", lane=a.start_lane, endPos=_f(a.start_pos), duration="1000000")
+    else:
+        el = ET.Element("person", id=a.id, type=vtype, depart=depart, departPos=_f(a.start_pos))
+        if a.nav is NavType.IMMOBILE or (a.nav is NavType.LINEAR and a.dest_edge is None):
+            ET.SubElement(el, "stop", lane=a.start_lane, endPos=_f(a.start_pos), duration="1000000")
+        else:
+            walk = ET.SubElement(el, "walk", to=a.dest_edge or a.start_edge, **{"from": a.start_edge})
+            if a.dest_pos is not None:
+                walk.set("arrivalPos", _f(a.dest_pos))
+    _param(el, "drivefuzz.nav", a.nav.value)
+    _param(el, "drivefuzz.start_lane", a.start_lane)
+    _param(el, "drivefuzz.speed", _f(a.speed))
+    if a.dest_edge is not None:
+        _param(el, "drivefuzz.dest_edge", a.dest_edge)
+    if a.dest_pos is not None:
+        _param(el, "drivefuzz.dest_pos", _f(a.dest_pos))
+    if a.dest_xy is not None:
+        _param(el, "drivefuzz.dest_xy", f"{_f(a.dest_xy[0])},{_f(a.dest_xy[1])}")
+    if a.maneuvers:
+        _param(el, "drivefuzz.maneuvers", json.dumps([m.model_dump(mode="json") for m in a.maneuvers]))
+    return el
+
+
+def additional_xml(scenario: Scenario, puddle_lanes: list[list[str]], weather_xy: tuple[float, float]) -> str:
+    root = ET.Element("additional")
+    for i, p in enumerate(scenario.puddles):
+        shape = " ".join(f"{x:.3f},{y:.3f}" for x, y in puddle_corners(p))
+        poly = ET.SubElement(root, "poly", id=f"puddle_{i}", type="drivefuzz.puddle", color="0,90,200",
+                             fill="1", layer="1", shape=shape)
+        for key in ("x", "y", "length", "width", "rotation", "friction"):
+            _param(poly, f"drivefuzz.{key}", _f(getattr(p, key)))
+    for i, p in enumerate(scenario.puddles):
+        lanes = puddle_lanes[i] if i < len(puddle_lanes) else []
+        if lanes:
+            vss = ET.SubElement(root, "variableSpeedSign", id=f"puddle_{i}_friction", lanes=" ".join(lanes))
+            ET.SubElement(vss, "step", time="0", friction=_f(p.friction))
+    poi = ET.SubElement(root, "poi", id="drivefuzz.weather", type="drivefuzz.weather", color="0,0,0",
+                        x=f"{weather_xy[0]:.3f}", y=f"{weather_xy[1]:.3f}", layer="2")
+    for key, value in scenario.weather.model_dump().items():
+        _param(poi, f"drivefuzz.{key}", _f(value))
+    ET.indent(root)
+    return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def sumocfg_xml(net_rel: str, step_length: float, time_limit: float) -> str:
+    return (
+        "<configuration>\n"
+        f'    <input><net-file value="{net_rel}"/><route-files value="{ROUTES}"/>'
+        f'<additional-files value="{ADDITIONAL}"/></input>\n'
+        f'    <time><begin value="0"/><end value="{time_limit!r}"/><step-length value="{step_length!r}"/></time>\n'
+        '    <processing><time-to-teleport value="-1"/><collision.action value="warn"/>'
+        '<collision.check-junctions value="true"/></processing>\n'
+        '    <random_number><seed value="0"/></random_number>\n'
+        "</configuration>\n"
+    )
+
+
+def write_scenario(scenario: Scenario, folder: str | os.PathLike, *, base: str | os.PathLike | None = None) -> Path:
+    """Validate ``scenario`` against its network and write its folder. Returns the manifest path.
+
+    ``base`` resolves a relative ``scenario.network`` (default: the current directory).
+    The manifest refers to the network by a path relative to ``folder`` when it can.
+    """
+    from drivefuzz.roadmap import load_roadmap
+    from drivefuzz.validate import puddle_lanes, validate
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    net_path = scenario.network_path(base).resolve()
+    rmap = load_roadmap(net_path)
+    route = validate(scenario, rmap, source=str(folder / MANIFEST))
+    try:
+        net_ref = os.path.relpath(net_path, folder.resolve())
+    except ValueError:  # other drive on Windows
+        net_ref = str(net_path)
+    start = rmap.geom(scenario.mission.start_lane).position(scenario.mission.start_pos)
+    atomic_write_text(folder / ROUTES, routes_xml(scenario, route))
+    atomic_write_text(folder / ADDITIONAL,
+                      additional_xml(scenario, [puddle_lanes(p, rmap) for p in scenario.puddles], start[:2]))
+    atomic_write_text(folder / SUMOCFG, sumocfg_xml(net_ref, scenario.sim.step_length, scenario.sim.time_limit))
+    manifest = {
+        "drivefuzz_scenario": SCHEMA_VERSION,
+        "name": scenario.name,
+        "network": net_ref,
+        "routes": ROUTES,
+        "additional": ADDITIONAL,
+        "ads": scenario.ads.model_dump(mode="json"),
+        "seed": scenario.seed,
+        "sim": scenario.sim.model_dump(mode="json"),
+    }
+    return atomic_write_text(folder / MANIFEST, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
+
+
+# ---------------------------------------------------------------- reading
+def _pydantic_error(source: str, exc: ValidationError, prefix: str = "") -> InvalidScenario:
+    err = exc.errors()[0]
+    loc = ".".join(str(p) for p in err.get("loc", ()) if p != "__root__")
+    field = f"{prefix}{'.' if prefix and loc else ''}{loc}" or None
+    return InvalidScenario(source, field, err.get("msg", str(exc)))
+
+
+def _parse_xml(path: Path) -> ET.Element:
+    if not path.is_file():
+        raise InvalidScenario(str(path), None, "file is missing", "a SUMO XML file written by drivefuzz")
+    try:
+        return ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise InvalidScenario(str(path), None, f"malformed XML ({exc})") from None
+
+
+def read_scenario(path: str | os.PathLike, *, validate_network: bool = True) -> Scenario:
+    """Read a scenario folder (or its ``scenario.json``). The network path becomes absolute."""
+    path = Path(path)
+    manifest_path = path / MANIFEST if path.is_dir() else path
+    folder = manifest_path.parent
+    src = str(manifest_path)
+    if not manifest_path.is_file():
+        raise InvalidScenario(src, None, "no such scenario", "a folder holding scenario.json, or the file itself")
+    try:
+        manifest = json.loads(manifest_path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise InvalidScenario(src, None, f"not valid JSON ({exc})") from None
+    if not isinstance(manifest, dict) or manifest.get("drivefuzz_scenario") != SCHEMA_VERSION:
+        raise InvalidScenario(src, "drivefuzz_scenario", "missing or unsupported schema version",
+                              f"{SCHEMA_VERSION}")
+    for key in ("network", "routes", "additional"):
+        if not isinstance(manifest.get(key), str):
+            raise InvalidScenario(src, key, "missing", "a file name")
+    routes_path = folder / manifest["routes"]
+    add_path = folder / manifest["additional"]
+    mission, actors = _read_routes(routes_path)
+    puddles, weather = _read_additional(add_path)
+    net = Path(manifest["network"])
+    net = net if net.is_absolute() else (folder / net).resolve()
+    try:
+        scenario = Scenario(
+            network=str(net), mission=mission, actors=tuple(actors), puddles=tuple(puddles), weather=weather,
+            ads=AdsSpec.model_validate(manifest.get("ads", {})), seed=manifest.get("seed", 0),
+            sim=SimOptions.model_validate(manifest.get("sim", {})), name=manifest.get("name", folder.name),
+        )
+    except ValidationError as exc:
+        raise _pydantic_error(src, exc) from None
+    if validate_network:
+        from drivefuzz.roadmap import load_roadmap
+        from drivefuzz.validate import validate
+
+        from drivefuzz.errors import InvalidNetwork
+
+        try:
+            rmap = load_roadmap(net)
+        except InvalidNetwork as exc:
+            raise InvalidScenario(src, "network", exc.problem, "path of a SUMO .net.xml relative to the folder") from None
+        validate(scenario, rmap, source=src)
+    return scenario
+
+
+def _read_routes(path: Path) -> tuple[Mission, list[Actor]]:
+    root = _parse_xml(path)
+    src = str(path)
+    mission = None
+    actors: list[Actor] = []
+    for el in root:
+        if el.tag not in ("vehicle", "trip", "person"):
+            continue
+        params = _params(el)
+        try:
+            if params.get("drivefuzz.role") == "ego":
+                edges = el.find("route").get("edges").split()
+                mission = Mission(start_lane=f"{edges[0]}_{el.get('departLane')}", start_pos=float(el.get("departPos")),
+                                  goal_edge=edges[-1], goal_pos=float(el.get("arrivalPos")),
+                                  start_speed=float(el.get("departSpeed", 0)))
+                continue
+            dest_xy = params.get("drivefuzz.dest_xy")
+            actors.append(Actor(
+                id=el.get("id"),
+                kind=ActorKind.PEDESTRIAN if el.tag == "person" else ActorKind.VEHICLE,
+                nav=NavType(params["drivefuzz.nav"]),
+                start_lane=params["drivefuzz.start_lane"],
+                start_pos=float(el.get("departPos")),
+                speed=float(params["drivefuzz.speed"]),
+                depart=float(el.get("depart")),
+                dest_edge=params.get("drivefuzz.dest_edge"),
+                dest_pos=float(params["drivefuzz.dest_pos"]) if "drivefuzz.dest_pos" in params else None,
+                dest_xy=tuple(float(v) for v in dest_xy.split(",")) if dest_xy else None,
+                maneuvers=tuple(Maneuver.model_validate(m) for m in json.loads(params.get("drivefuzz.maneuvers", "[]"))),
+            ))
+        except ValidationError as exc:
+            raise _pydantic_error(src, exc, prefix=f"{el.tag}[{el.get('id')}]") from None
+        except (KeyError, TypeError, AttributeError, ValueError) as exc:
+            raise InvalidScenario(src, f"{el.tag}[{el.get('id')}]",
+                                  f"missing or malformed attribute or drivefuzz param ({exc})") from None
+    if mission is None:
+        raise InvalidScenario(src, "vehicle[ego]", "no ego vehicle",
+                              'a <vehicle id="ego"> with <param key="drivefuzz.role" value="ego"/>')
+    return mission, actors
+
+
+def _read_additional(path: Path) -> tuple[list[Puddle], Weather]:
+    root = _parse_xml(path)
+    src = str(path)
+    puddles = []
+    weather = Weather()
+    for el in root:
+        params = {k.removeprefix("drivefuzz."): v for k, v in _params(el).items()}
+        try:
+            if el.tag == "poly" and el.get("type") == "drivefuzz.puddle":
+                puddles.append(Puddle(**{k: float(v) for k, v in params.items()}))
+            elif el.tag == "poi" and el.get("type") == "drivefuzz.weather":
+                weather = Weather(**{k: float(v) for k, v in params.items()})
+        except ValidationError as exc:
+            raise _pydantic_error(src, exc, prefix=f"{el.tag}[{el.get('id')}]") from None
+        except ValueError as exc:
+            raise InvalidScenario(src, f"{el.tag}[{el.get('id')}]", f"malformed param ({exc})") from None
+    return puddles, weather
+
+
+def load_scenario(path: str | os.PathLike) -> Scenario:
+    """Load a scenario from a folder, its ``scenario.json``, or a plain JSON dump of the model."""
+    path = Path(path)
+    if path.is_file() and path.name != MANIFEST and path.suffix == ".json":
+        try:
+            data = json.loads(path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise InvalidScenario(str(path), None, f"not valid JSON ({exc})") from None
+        if "drivefuzz_scenario" in data:
+            return read_scenario(path)
+        try:
+            scenario = Scenario.model_validate(data)
+        except ValidationError as exc:
+            raise _pydantic_error(str(path), exc) from None
+        net = scenario.network_path(path.parent)
+        scenario = scenario.model_copy(update={"network": str(net.resolve())})
+        from drivefuzz.roadmap import load_roadmap
+        from drivefuzz.validate import validate
+
+        validate(scenario, load_roadmap(net), source=str(path))
+        return scenario
+    return read_scenario(path)
+

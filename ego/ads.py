@@ -1,0 +1,127 @@
+"""The reference ADS: sensing -> perception -> planning -> actuation.
+
+Options (``--ads-option K=V``):
+
+- ``fault``: switch on a named fault, for evaluating oracles (the paper's tbl:oracle):
+  ``speeding`` (target speed above the limit), ``no_traffic_lights`` (traffic-light
+  detection disabled), ``no_control`` (control module disabled: no control output),
+  ``steer_left`` (steering forced left).
+- ``speed_margin``: fraction of the speed limit it aims for (default 0.95).
+- ``max_lat_accel``: comfort limit in curves [m/s^2].
+- ``sensor_range``: clear-weather sensor range [m].
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+from drivefuzz.ads import ADS, Control, MissionInfo, Observation
+from drivefuzz.physics import VehicleParams
+
+from ego.actuation import PurePursuit, SpeedController
+from ego.perception import Perception
+from ego.planning import build_path, idm_accel, stop_accel
+from ego.sensing import Sensors, SensorSpec
+
+FAULTS = ("none", "speeding", "no_traffic_lights", "no_control", "steer_left")
+
+
+class ReferenceADS(ADS):
+    name = "ego"
+
+    class Options(ADS.Options):
+        fault: Literal["none", "speeding", "no_traffic_lights", "no_control", "steer_left"] = "none"
+        speed_margin: float = 0.95
+        max_lat_accel: float = 2.5
+        sensor_range: float = 100.0
+        cruise_speed: float = 0.0  # [m/s] cap below the limit (0: none)
+
+    def reset(self, mission: MissionInfo, roadmap) -> None:
+        params = VehicleParams()
+        self.mission = mission
+        self.rmap = roadmap
+        self.sensors = Sensors(SensorSpec(range_m=self.options.sensor_range), mission.seed)
+        self.perception = Perception()
+        self.path, self.edge_s = build_path(roadmap, mission.route, mission.start_lane, mission.start_pos,
+                                            mission.goal_edge, mission.goal_pos)
+        gi, self.s_goal, _ = self.path.locate(*mission.goal_xy, hint=len(self.path.pts) - 1,
+                                              window=len(self.path.pts))
+        self.path_idx = 0
+        self.params = params
+        self.tracker = PurePursuit(params.wheelbase, params.max_road_wheel_angle)
+        self.speed = SpeedController(max_decel=params.max_brake_decel)
+        self._done = False
+        self.s_center = 0.0
+
+    def done(self) -> bool:
+        return self._done
+
+    def step(self, obs: Observation) -> Control:
+        fault = self.options.fault
+        if fault == "no_control":
+            return Control(0.0, 0.0, 0.0)
+        det = self.sensors.sense(obs, tl_enabled=fault != "no_traffic_lights")
+        world = self.perception.update(obs, det)
+        ego = obs.ego
+        ch, sh = math.cos(ego.heading), math.sin(ego.heading)
+        self.path_idx, s_c, _lat = self.path.locate(ego.x, ego.y, self.path_idx)
+        self.s_center = s_c
+        half = ego.length / 2.0
+        rear_off = self.params.centre_to_rear_axle
+        rx, ry = ego.x - rear_off * ch, ego.y - rear_off * sh
+        v = ego.speed
+
+        # target speed: limit, curvature ahead
+        limit = world.speed_limit
+        v0 = limit * self.options.speed_margin
+        if fault == "speeding":
+            v0 = limit * 1.3 + 2.0
+        if self.options.cruise_speed > 0:
+            v0 = min(v0, self.options.cruise_speed)
+        i0 = self.path_idx
+        i1 = min(i0 + int(max(v * 3.0, 15.0)), len(self.path.pts) - 1)
+        kmax = float(self.path.curvature[i0:i1 + 1].max()) if i1 > i0 else 0.0
+        if kmax > 1e-4:
+            v0 = min(v0, math.sqrt(self.options.max_lat_accel / kmax))
+        accel = idm_accel(v, v0, math.inf, 0.0)
+
+        # obstacles in the path: leaders and pedestrians (predicted 1.5 s ahead)
+        for tr in world.tracks:
+            for horizon in (0.0, 1.5) if tr.kind == "pedestrian" else (0.0,):
+                px = tr.x + tr.speed * math.cos(tr.heading) * horizon
+                py = tr.y + tr.speed * math.sin(tr.heading) * horizon
+                _, s_o, lat_o = self.path.locate(px, py, self.path_idx, window=120)
+                ahead = s_o - s_c
+                if ahead <= 0 or ahead > 80:
+                    continue
+                corridor = 1.3 + tr.width / 2 + (0.8 if tr.kind == "pedestrian" else 0.0)
+                if abs(lat_o) > corridor:
+                    continue
+                gap = ahead - half - tr.length / 2
+                rel = math.cos(tr.heading - ego.heading)
+                dv = v - tr.speed * max(rel, 0.0)
+                accel = min(accel, idm_accel(v, v0, gap, dv))
+
+        # traffic light
+        if world.tl_state is not None and world.tl_state in "rRyYu" and world.tl_distance < 120:
+            dist = world.tl_distance - 1.0
+            if world.tl_state in "yY" and dist < v * v / (2 * 4.0):
+                pass  # too close to stop comfortably on yellow: go
+            else:
+                accel = min(accel, stop_accel(v, dist))
+
+        # goal: stop with the centre on the goal point
+        to_goal = self.s_goal - s_c
+        accel = min(accel, stop_accel(v, to_goal, comfort=2.5) if to_goal < 60 else accel)
+        if to_goal < 1.5 and v < 0.5:
+            self._done = True
+        if self._done:
+            accel = min(accel, -3.0)
+
+        throttle, brake = self.speed.pedals(accel, v, v0)
+        s_rear = s_c - rear_off
+        steer = self.tracker.steer(self.path, s_rear, rx, ry, ego.heading, v)
+        if fault == "steer_left":
+            steer = min(1.0, steer + 0.25)
+        return Control(steer, throttle, brake)
