@@ -281,6 +281,9 @@ def _run(sim, scenario: Scenario, rmap, ads: ADS, oracles: list[Oracle], params:
     mission = scenario.mission
     route = list(rmap.route(mission.start_edge, mission.goal_edge))
     gx, gy, _ = rmap.geom(rmap.drive_lane(mission.goal_edge)).position(mission.goal_pos)
+    # the goal is reached on any passenger lane of the goal edge
+    goal_pts = [rmap.geom(l.getID()).position(mission.goal_pos)[:2]
+                for l in rmap.edge(mission.goal_edge).getLanes() if l.allows("passenger")]
     half_len = params.length / 2.0
     rng = random.Random(scenario.seed)
     weather = scenario.weather
@@ -426,7 +429,7 @@ def _run(sim, scenario: Scenario, rmap, ads: ADS, oracles: list[Oracle], params:
         arr = np.asarray(rows, dtype=float).reshape(-1, 7)
         collisions = tuple((c.collider, c.victim, c.type) for c in sim.simulation.getCollisions()
                            if EGO_ID in (c.collider, c.victim))
-        goal_dist = math.hypot(state.x - gx, state.y - gy)
+        goal_dist = min(math.hypot(state.x - px, state.y - py) for px, py in goal_pts)
         timings["world"] += perf() - t1
 
         # 2. record frame ----------------------------------------------------------------------

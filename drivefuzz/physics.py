@@ -96,10 +96,11 @@ class VehicleParams:
     tyre_shape_rear: float = 1.4
     lateral_grip_front: float = 0.9  # effective axle lateral friction / mu
     lateral_grip_rear: float = 1.0
+    tyre_load_sensitivity: float = 0.15  # mu_eff = mu (1 - s (Fz - Fz_static) / Fz_static)
     tyre_curvature_front: float = 0.0  # Pacejka E
     tyre_curvature_rear: float = 0.0
     # Numerics
-    max_substep: float = 0.025  # [s] internal integration step
+    max_substep: float = 0.0125  # [s] internal integration step (0.05 s -> 4 sub-steps)
     kinematic_blend_low: float = 1.0  # [m/s] below: kinematic single-track model
     kinematic_blend_high: float = 2.0  # [m/s] above: dynamic model
 
@@ -137,6 +138,11 @@ class VehicleParams:
         for name in ("tyre_shape_front", "tyre_shape_rear"):
             if not getattr(self, name) < 2.0:
                 raise ValueError(f"{name} (Pacejka C) must be < 2")
+        for name in ("lateral_grip_front", "lateral_grip_rear"):
+            if not 0.0 < getattr(self, name) <= 1.5:
+                raise ValueError(f"{name} must be in (0, 1.5]")
+        if not 0.0 <= self.tyre_load_sensitivity <= 0.5:
+            raise ValueError("tyre_load_sensitivity must be in [0, 0.5]")
         for name in ("tyre_curvature_front", "tyre_curvature_rear"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v < 1.0):
@@ -355,6 +361,9 @@ class VehiclePhysics:
         v_hi = p.kinematic_blend_high
         v_span = v_hi - v_lo
         mu_avg = 0.5 * (muf + mur)
+        ls = p.tyre_load_sensitivity
+        fzf0 = mg * lr / L
+        fzr0 = mg - fzf0
 
         n = int(math.ceil(dt / p.max_substep - 1e-9))
         if n < 1:
@@ -403,8 +412,11 @@ class VehiclePhysics:
             elif fzf > fz_max:
                 fzf = fz_max
             fzr = mg - fzf
-            capf = muf * fzf  # peak tyre force per axle (friction-ellipse radius)
-            capr = mur * fzr
+            # peak tyre force per axle (friction-ellipse radius); mu falls off with load
+            t = 1.0 - ls * (fzf - fzf0) / fzf0
+            capf = muf * fzf * (t if t > 0.2 else 0.2)
+            t = 1.0 - ls * (fzr - fzr0) / fzr0
+            capr = mur * fzr * (t if t > 0.2 else 0.2)
 
             # -- blend weight dynamic / kinematic
             v = math.hypot(vx, vy)
@@ -534,7 +546,9 @@ class VehiclePhysics:
             # -- longitudinal: propulsion then no-overshoot resistances
             a_n = (pf * cd + pr_) / m
             if w > 0.0:
-                a_n += w * (r * vy - fyf * sd / m)
+                # Coriolis term with the *updated* r, vy (symplectic Euler: the body-frame
+                # velocity rotation neither gains nor loses energy, even in a fast spin)
+                a_n += w * (r_d * vy_d - fyf * sd / m)
             a_res = (qf * cd + qr + drag * vx * vx + rr) / m
             v1 = vx + h * a_n
             if v1 > 0.0:

@@ -152,7 +152,9 @@ class QualityConfig(BaseModel):
     us_gain: Literal["speed_normalised", "raw"] = Field(
         "speed_normalised", description="understeer gain Ay_h/(SWA_h*Vx_h^2) or the literal Ay_h/SWA_h"
     )
-    us_peak_window_s: float = Field(2.0, gt=0, description="[s] FD compares the gain with its max over this trailing window")
+    us_peak_window_s: float = Field(
+        2.0, gt=0, description="[s] FD compares the gain with its max over this trailing window"
+    )
 
 
 @dataclass(frozen=True)
@@ -439,7 +441,8 @@ def min_distance(trace) -> tuple[float | None, int | None, str | None]:
     f = a.frame
     ex, ey, eh = (np.asarray(trace.ego[k], dtype=float)[f] for k in ("x", "y", "heading"))
     al, aw = a.length[a.actor], a.width[a.actor]
-    ok = np.isfinite(ex) & np.isfinite(ey) & np.isfinite(eh) & np.isfinite(a.x) & np.isfinite(a.y) & np.isfinite(a.heading)
+    ok = np.isfinite(ex) & np.isfinite(ey) & np.isfinite(eh)
+    ok &= np.isfinite(a.x) & np.isfinite(a.y) & np.isfinite(a.heading)
     if not ok.any():
         return None, None, None
     idx = np.flatnonzero(ok)

@@ -45,8 +45,7 @@ class ReferenceADS(ADS):
         self.perception = Perception()
         self.path, self.edge_s = build_path(roadmap, mission.route, mission.start_lane, mission.start_pos,
                                             mission.goal_edge, mission.goal_pos)
-        gi, self.s_goal, _ = self.path.locate(*mission.goal_xy, hint=len(self.path.pts) - 1,
-                                              window=len(self.path.pts))
+        _, self.s_goal, _ = self.path.locate(*mission.goal_xy, hint=0, window=len(self.path.pts))
         self.path_idx = 0
         self.params = params
         self.tracker = PurePursuit(params.wheelbase, params.max_road_wheel_angle)
@@ -113,7 +112,7 @@ class ReferenceADS(ADS):
 
         # goal: stop with the centre on the goal point
         to_goal = self.s_goal - s_c
-        accel = min(accel, stop_accel(v, to_goal, comfort=2.5) if to_goal < 60 else accel)
+        accel = min(accel, stop_accel(v, to_goal, comfort=2.5))
         if to_goal < 1.5 and v < 0.5:
             self._done = True
         if self._done:

@@ -125,8 +125,11 @@ def idm_accel(v: float, v0: float, gap: float, dv: float, a_max: float = 2.0, b:
 
 
 def stop_accel(v: float, dist: float, comfort: float = 3.0) -> float:
-    """Deceleration [m/s^2] (<= 0) to stop within ``dist`` metres; 0 while far away."""
+    """Deceleration [m/s^2] (< 0) to stop within ``dist`` metres; +inf (no constraint) while far away."""
     if dist <= 0.3:
         return -8.0 if v > 0.05 else -1.0
     need = v * v / (2.0 * dist)
-    return -need * 1.1 if need > 0.3 * comfort else 0.0
+    if need > 0.3 * comfort:
+        return -need * 1.1
+    # close to the stop point and slow: creep up to it instead of stopping short
+    return min(0.5, 0.5 * (dist - 0.5)) if dist < 8.0 else math.inf

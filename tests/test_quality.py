@@ -356,3 +356,28 @@ def test_random_traces_never_crash(rows):
     q = score_trace(tr)
     assert math.isfinite(q.score) and q.score <= 0
     assert all(0 <= getattr(q, e) <= n for e in EVENTS)
+
+
+def test_md_pruning_matches_brute_force():
+    from drivefuzz.geometry import rect_distance
+    from drivefuzz.quality import min_distance
+
+    rng = np.random.default_rng(7)
+    n = 120
+    t = np.arange(n) * DT
+    actors = []
+    for k in range(25):
+        h = rng.uniform(-math.pi, math.pi)
+        vv = rng.uniform(0, 12)
+        actors.append({"id": f"a{k}", "kind": "vehicle", "length": rng.uniform(0.4, 12), "width": rng.uniform(0.4, 3),
+                       "x": rng.uniform(-10, 70) + vv * math.cos(h) * t, "y": rng.uniform(-8, 8) + vv * math.sin(h) * t,
+                       "heading": h + 0.1 * t, "speed": vv})
+    tr = make_trace(n, actors=actors, heading=0.05 * np.sin(t))
+    md, frame, aid = min_distance(tr)
+    a = tr.actors
+    f = a.frame
+    d = rect_distance(tr["x"][f], tr["y"][f], tr["heading"][f], EGO_L, EGO_W,
+                      a.x, a.y, a.heading, a.length[a.actor], a.width[a.actor])
+    assert md == pytest.approx(d.min(), abs=1e-12)
+    k = int(np.argmin(d))
+    assert d[k] == pytest.approx(md) and (frame, aid) == (int(f[k]), a.ids[a.actor[k]]) or md == 0.0

@@ -1,0 +1,373 @@
+"""The ``drivefuzz`` command. The only module that turns errors into exit codes.
+
+Exit codes: 0 ran clean; 1 misbehaviour found (``fuzz``, ``run``) or not
+reproduced (``replay``); 2 usage or input error (one line on stderr, no
+traceback); 3 the simulator or a plugin failed.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import re
+import signal
+import sys
+import time
+from pathlib import Path
+from typing import Any, Sequence
+
+import click
+
+import drivefuzz
+from drivefuzz.errors import DriveFuzzError, InvalidConfig, InvalidInput
+
+EXIT_CLEAN, EXIT_FOUND, EXIT_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
+
+
+def _fail(msg: str, code: int) -> None:
+    click.echo(f"drivefuzz: error: {msg}", err=True)
+    sys.exit(code)
+
+
+def handle_errors(fn):
+    @functools.wraps(fn)
+    def wrapper(*args, **kwargs):
+        try:
+            return fn(*args, **kwargs)
+        except InvalidInput as exc:
+            _fail(str(exc), EXIT_INPUT)
+        except DriveFuzzError as exc:
+            _fail(str(exc), EXIT_INTERNAL)
+    return wrapper
+
+
+def parse_duration(text: str | None) -> float | None:
+    """'90', '90s', '10m', '2h', '1h30m' -> seconds."""
+    if text is None:
+        return None
+    m = re.fullmatch(r"\s*(?:(\d+(?:\.\d+)?)h)?\s*(?:(\d+(?:\.\d+)?)m)?\s*(?:(\d+(?:\.\d+)?)s?)?\s*", text)
+    if not m or not any(m.groups()):
+        raise InvalidConfig("--budget", None, f"cannot read duration {text!r}", "e.g. 90s, 10m, 2h, 1h30m")
+    h, mi, s = (float(g) if g else 0.0 for g in m.groups())
+    return h * 3600 + mi * 60 + s
+
+
+def parse_kv(pairs: Sequence[str], option: str) -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for pair in pairs:
+        key, sep, raw = pair.partition("=")
+        if not sep or not key:
+            raise InvalidConfig(option, pair, "expected KEY=VALUE", "e.g. fault=speeding")
+        try:
+            out[key] = json.loads(raw)
+        except json.JSONDecodeError:
+            out[key] = raw
+    return out
+
+
+def load_config_file(path: str | None) -> dict[str, Any]:
+    """A TOML or JSON file with sections ``[fuzz]``, ``[oracles.NAME]``, ``[mutation]``, ``[quality]``, ``[ads]``."""
+    if not path:
+        return {}
+    p = Path(path)
+    if not p.is_file():
+        raise InvalidConfig(path, None, "no such config file", "a TOML or JSON file")
+    try:
+        if p.suffix == ".json":
+            data = json.loads(p.read_text())
+        else:
+            import tomllib
+
+            data = tomllib.loads(p.read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise InvalidConfig(path, None, f"cannot parse ({exc})", "valid TOML or JSON") from None
+    allowed = {"fuzz", "oracles", "mutation", "quality", "ads"}
+    unknown = set(data) - allowed
+    if unknown:
+        raise InvalidConfig(path, sorted(unknown)[0], "unknown section", ", ".join(sorted(allowed)))
+    return data
+
+
+def oracle_options(fn):
+    fn = click.option("--oracle", "oracle_kv", multiple=True, metavar="NAME.KEY=VALUE",
+                      help="Set an oracle threshold, e.g. speeding.tolerance=1.0.")(fn)
+    fn = click.option("--no-oracle", "no_oracle", multiple=True, metavar="NAME", help="Disable an oracle.")(fn)
+    fn = click.option("--config", "config_file", type=click.Path(dir_okay=False),
+                      help="TOML/JSON file with [fuzz], [oracles.NAME], [mutation], [quality], [ads] sections.")(fn)
+    return fn
+
+
+def _oracle_settings(config: dict[str, Any], kv, disabled, source: str | None = None):
+    from drivefuzz.oracle import parse_oracle_options
+
+    settings = parse_oracle_options(kv, disabled, base=config.get("oracles", {}))
+    settings.instantiate()  # validate names and values now, not in the middle of a campaign
+    return settings
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(drivefuzz.__version__, prog_name="drivefuzz")
+def main() -> None:
+    """drivefuzz: find safety-critical misbehaviour of automated-driving controllers in SUMO."""
+
+
+# ----------------------------------------------------------------------------- run
+@main.command()
+@click.argument("scenario", type=click.Path())
+@click.option("--gui", is_flag=True, help="Show the run in sumo-gui (through traci; same code path).")
+@click.option("--ads", "ads_name", default=None, help="ADS plugin (default: the scenario's).")
+@click.option("--ads-option", multiple=True, metavar="K=V", help="ADS option, e.g. fault=speeding.")
+@click.option("--trace", "trace_out", type=click.Path(file_okay=False), help="Save the trace (Parquet) here.")
+@oracle_options
+@handle_errors
+def run(scenario, gui, ads_name, ads_option, trace_out, oracle_kv, no_oracle, config_file):
+    """Run one SCENARIO (a scenario folder or its scenario.json) and print its outcome."""
+    from drivefuzz.execute import execute
+    from drivefuzz.quality import score_trace
+    from drivefuzz.scenario import AdsSpec
+    from drivefuzz.sumofiles import load_scenario
+
+    config = load_config_file(config_file)
+    sc = load_scenario(scenario)
+    if ads_name or ads_option:
+        opts = dict(sc.ads.options) if not ads_name or ads_name == sc.ads.name else {}
+        opts.update(parse_kv(ads_option, "--ads-option"))
+        sc = sc.model_copy(update={"ads": AdsSpec(name=ads_name or sc.ads.name, options=opts)})
+    settings = _oracle_settings(config, oracle_kv, no_oracle)
+    ex = execute(sc, oracles=settings.instantiate(), gui=gui)
+    click.echo(f"{sc.name}: {ex.termination.value} after {ex.trace.n_frames} frames "
+               f"({ex.trace.n_frames * sc.sim.step_length:.1f} s simulated, {ex.wall_time:.2f} s wall)")
+    for m in ex.misbehaviors:
+        click.echo(f"  MISBEHAVIOR {m.oracle}/{m.kind} at frame {m.frame} (t={m.time:.2f} s)"
+                   f"{' with ' + ', '.join(m.actors) if m.actors else ''}")
+    if not ex.misbehaviors:
+        q = score_trace(ex.trace)
+        click.echo(f"  quality score {q.score:.2f} ({json.dumps({k: v for k, v in q.as_dict().items() if k in ('ha', 'hb', 'ht', 'os', 'us', 'md')})})")
+    if trace_out:
+        ex.trace.save(trace_out)
+        click.echo(f"  trace saved to {trace_out}")
+    sys.exit(EXIT_FOUND if ex.misbehaviors else EXIT_CLEAN)
+
+
+# ---------------------------------------------------------------------------- seed
+@main.command()
+@click.argument("network", type=click.Path())
+@click.option("-n", "count", default=8, show_default=True, help="How many seeds.")
+@click.option("-o", "out", type=click.Path(file_okay=False), help="Output folder (default seeds/<network>/).")
+@click.option("--seed", "rng_seed", default=0, show_default=True, help="RNG seed.")
+@click.option("--no-verify", is_flag=True, help="Skip the dry run of the reference ADS.")
+@handle_errors
+def seed(network, count, out, rng_seed, no_verify):
+    """Write COUNT seed missions for NETWORK, each verified by a dry run of the reference ADS."""
+    from drivefuzz.roadmap import load_roadmap
+    from drivefuzz.seed import generate_seeds
+    from drivefuzz.sumofiles import write_scenario
+
+    rmap = load_roadmap(network)
+    out = Path(out or Path("seeds") / rmap.name)
+    seeds = generate_seeds(network, count, rng_seed, verify_runs=not no_verify,
+                           log=lambda s: click.echo(f"  {s}", err=True))
+    if not seeds:
+        raise InvalidConfig(network, None, "no mission on this network passed the dry run",
+                            "a network with connected passenger roads of 80-400 m routes")
+    for i, sc in enumerate(seeds):
+        write_scenario(sc, out / f"{i:03d}")
+    click.echo(f"wrote {len(seeds)} seed(s) to {out}")
+
+
+# ---------------------------------------------------------------------------- fuzz
+def _progress_printer():
+    tty = sys.stderr.isatty()
+    last = [0.0]
+
+    def show(p):
+        now = time.monotonic()
+        if not tty and now - last[0] < 10.0:
+            return
+        last[0] = now
+        best = "-" if p.best_score is None else f"{p.best_score:.1f}"
+        line = (f"execs {p.execs}  {p.rate:.2f}/s  seed {p.seed_index}  cycle {p.cycle}  "
+                f"best score {best}  findings {p.findings}")
+        click.echo(("\r" + line + "   ") if tty else line, err=True, nl=not tty)
+    return show
+
+
+@main.command()
+@click.argument("network", type=click.Path(), required=False)
+@click.option("-o", "out", type=click.Path(file_okay=False), help="Output directory (default: new under ./drivefuzz-out/).")
+@click.option("--resume", "resume_dir", type=click.Path(file_okay=False), help="Continue the campaign in this directory.")
+@click.option("--strategy", type=click.Choice(["all", "congestion", "entropy", "instability", "maneuver", "mix"]),
+              default=None, help="Mutation strategy [all].")
+@click.option("--cycles", type=int, default=None, help="Cycles per seed [10].")
+@click.option("--population", type=int, default=None, help="Mutants per cycle [8].")
+@click.option("--budget", default=None, help="Wall-clock budget, e.g. 90s, 10m, 2h.")
+@click.option("--max-execs", type=int, default=None, help="Stop after N executions.")
+@click.option("--seed", "rng_seed", type=int, default=None, help="Campaign RNG seed [0].")
+@click.option("--seeds", "seeds_dir", type=click.Path(file_okay=False), help="Seed folder (default seeds/<network>/).")
+@click.option("--ads", "ads_name", default=None, help="ADS plugin under test [ego].")
+@click.option("--ads-option", multiple=True, metavar="K=V", help="ADS option, e.g. fault=speeding.")
+@click.option("--no-feedback", is_flag=True, help="Pick successors at random (the paper's baseline).")
+@click.option("--continue-after-finding", is_flag=True, help="Keep fuzzing a seed after a finding.")
+@click.option("--time-limit", type=float, default=None, help="Simulated seconds per execution (default: the seed's).")
+@oracle_options
+@handle_errors
+def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_execs, rng_seed, seeds_dir, ads_name,
+         ads_option, no_feedback, continue_after_finding, time_limit, oracle_kv, no_oracle, config_file):
+    """Fuzz the ADS on NETWORK (a .net.xml). Exit 0: nothing found; 1: misbehaviour found; 2: bad input."""
+    from drivefuzz.fuzz import Campaign, FuzzConfig, load_campaign, replay_command
+    from drivefuzz.mutate import MutationConfig
+    from drivefuzz.quality import QualityConfig
+    from drivefuzz.scenario import AdsSpec
+
+    argv = ["drivefuzz", *sys.argv[1:]]
+    if resume_dir:
+        seeds, cfg, argv = load_campaign(resume_dir)
+        out_dir = Path(resume_dir)
+        if budget is not None:
+            cfg.budget_s = parse_duration(budget)
+        if max_execs is not None:
+            cfg.max_execs = max_execs
+    else:
+        if not network:
+            raise InvalidConfig("fuzz", "NETWORK", "missing", "a .net.xml file, or --resume OUT")
+        config = load_config_file(config_file)
+        fz = dict(config.get("fuzz", {}))
+        ads_cfg = dict(config.get("ads", {}))
+        ads_opts = dict(ads_cfg.get("options", {}))
+        ads_opts.update(parse_kv(ads_option, "--ads-option"))
+        try:
+            cfg = FuzzConfig(
+                cycles=cycles or fz.get("cycles", 10), population=population or fz.get("population", 8),
+                strategy=strategy or fz.get("strategy", "all"),
+                seed=rng_seed if rng_seed is not None else fz.get("seed", 0),
+                budget_s=parse_duration(budget or fz.get("budget")), max_execs=max_execs or fz.get("max_execs"),
+                feedback=not (no_feedback or fz.get("no_feedback", False)),
+                continue_after_finding=continue_after_finding or fz.get("continue_after_finding", False),
+                ads=AdsSpec(name=ads_name or ads_cfg.get("name", "ego"), options=ads_opts),
+                oracles=_oracle_settings(config, oracle_kv, no_oracle),
+                mutation=MutationConfig.model_validate(config.get("mutation", {})),
+                quality=QualityConfig.model_validate(config.get("quality", {})),
+                time_limit=time_limit or fz.get("time_limit"),
+            )
+        except ValueError as exc:  # pydantic
+            raise InvalidConfig(config_file or "options", None, str(exc).splitlines()[0]) from None
+        if cfg.cycles < 1 or cfg.population < 1:
+            raise InvalidConfig("--cycles/--population", None, "must be at least 1", "a positive integer")
+        from drivefuzz.ads import load_ads
+
+        load_ads(cfg.ads.name, cfg.ads.options)  # fail now on an unknown ADS or option
+        seeds = _seeds_for(network, seeds_dir)
+        out_dir = Path(out) if out else Path("drivefuzz-out") / time.strftime(f"{Path(network).name.split('.')[0]}-%Y%m%d-%H%M%S")
+        if out_dir.exists() and any(out_dir.iterdir()):
+            raise InvalidConfig("-o", str(out_dir), "output directory exists and is not empty",
+                                "a new directory, or --resume to continue it")
+    campaign = Campaign(out_dir, seeds, cfg, argv, on_progress=_progress_printer())
+
+    def _stop(signum, _frame):
+        campaign.stop_requested = True
+        click.echo("\nstopping after the current execution (Ctrl-C again to abort)...", err=True)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    old = signal.signal(signal.SIGINT, _stop)
+    click.echo(f"fuzzing {len(seeds)} seed(s) -> {out_dir}", err=True)
+    try:
+        findings = campaign.run(resume=bool(resume_dir))
+    finally:
+        signal.signal(signal.SIGINT, old)
+    p = campaign.progress
+    click.echo("", err=True)
+    click.echo(f"{p.execs} executions in {time.monotonic() - p.started:.0f} s, {len(findings)} finding(s); "
+               f"output in {out_dir}")
+    if findings:
+        click.echo(f"{'#':>3}  {'oracle/kind':<26} {'time':>7}  {'actors':<12} replay")
+        for i, f in enumerate(findings):
+            m = f.misbehavior
+            click.echo(f"{i:>3}  {m.oracle + '/' + m.kind:<26} {m.time:>6.2f}s  {','.join(m.actors) or '-':<12} "
+                       f"{replay_command(f.path)}")
+    if campaign.stop_requested:
+        click.echo(f"interrupted; continue with: drivefuzz fuzz --resume {out_dir}", err=True)
+    sys.exit(EXIT_FOUND if findings else EXIT_CLEAN)
+
+
+def _seeds_for(network: str, seeds_dir: str | None):
+    from drivefuzz.roadmap import load_roadmap
+    from drivefuzz.seed import generate_seeds, list_seeds
+    from drivefuzz.sumofiles import load_scenario, write_scenario
+
+    rmap = load_roadmap(network)
+    folder = Path(seeds_dir) if seeds_dir else Path("seeds") / rmap.name
+    found = list_seeds(folder) if folder.is_dir() else []
+    if found:
+        seeds = []
+        for p in found:
+            sc = load_scenario(p)
+            if Path(sc.network).resolve() != Path(network).resolve():
+                sc = sc.model_copy(update={"network": str(Path(network).resolve())})
+            seeds.append(sc)
+        return seeds
+    click.echo(f"no seeds in {folder}: generating and verifying 4 for {rmap.path.name}...", err=True)
+    seeds = generate_seeds(network, 4, 0)
+    if not seeds:
+        raise InvalidConfig(network, None, "could not generate a seed mission that the reference ADS completes",
+                            "a network with connected passenger roads")
+    for i, sc in enumerate(seeds):
+        write_scenario(sc, folder / f"{i:03d}")
+    return seeds
+
+
+# -------------------------------------------------------------------------- replay
+@main.command()
+@click.argument("finding", type=click.Path())
+@click.option("--gui", is_flag=True, help="Show the run in sumo-gui.")
+@handle_errors
+def replay(finding, gui):
+    """Run a FINDING directory again; 'reproduced' only if the same oracle fires at the same frame."""
+    from drivefuzz.execute import execute
+    from drivefuzz.oracle import Misbehavior, OracleSettings
+    from drivefuzz.sumofiles import read_scenario
+
+    folder = Path(finding)
+    vpath = folder / "verdict.json"
+    if not vpath.is_file():
+        raise InvalidConfig(finding, None, "not a finding directory (no verdict.json)", "findings/<n>-<oracle>-<hash>/")
+    verdict = json.loads(vpath.read_text())
+    want = Misbehavior.from_dict(verdict["misbehaviors"][0])
+    sc = read_scenario(folder)
+    ex = execute(sc, oracles=OracleSettings(settings=verdict.get("oracles", {})).instantiate(), gui=gui)
+    got = ex.misbehaviors[0] if ex.misbehaviors else None
+    if got is not None and got.oracle == want.oracle and got.kind == want.kind and got.frame == want.frame:
+        click.echo(f"reproduced: {got.oracle}/{got.kind} at frame {got.frame} (t={got.time:.2f} s)")
+        sys.exit(EXIT_CLEAN)
+    seen = f"{got.oracle}/{got.kind} at frame {got.frame}" if got else f"no misbehaviour ({ex.termination.value})"
+    click.echo(f"NOT reproduced: expected {want.oracle}/{want.kind} at frame {want.frame}, got {seen}")
+    sys.exit(EXIT_FOUND)
+
+
+# ------------------------------------------------------------------------- oracles
+@main.command("oracles")
+@handle_errors
+def oracles_cmd():
+    """List the installed oracles and their settings."""
+    from drivefuzz.oracle import available_oracles
+
+    for name, cls in available_oracles().items():
+        click.echo(f"{name}: {cls.description}")
+        for key, f in cls.Config.model_fields.items():
+            click.echo(f"    {name}.{key} = {f.default!r}{'  # ' + f.description if f.description else ''}")
+
+
+@main.command("ads")
+@handle_errors
+def ads_cmd():
+    """List the installed ADS plugins and their options."""
+    from drivefuzz.ads import available_ads
+
+    for name, ep in sorted(available_ads().items()):
+        cls = ep.load()
+        click.echo(f"{name}: {ep.value}")
+        for key, f in cls.Options.model_fields.items():
+            click.echo(f"    {key} = {f.default!r}")
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

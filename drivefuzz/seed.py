@@ -1,0 +1,104 @@
+"""Seed scenarios: random missions on a network (the paper's Algorithm 2), verified by a dry run.
+
+A seed is a mission with no actors, no puddles and clear weather: start and goal
+on lanes that allow passenger cars, with a route of sensible length between
+them. ``drivefuzz seed`` keeps only seeds that the reference ADS completes
+without any misbehaviour, so that every later finding is caused by what the
+fuzzer added.
+"""
+
+from __future__ import annotations
+
+import random
+from pathlib import Path
+from typing import Callable, Iterator
+
+from drivefuzz.roadmap import PASSENGER, RoadMap
+from drivefuzz.scenario import AdsSpec, Mission, Scenario, SimOptions
+
+#: Route length [m] a seed mission aims for.
+MIN_ROUTE_M = 80.0
+MAX_ROUTE_M = 400.0
+
+
+def time_limit_for(rmap: RoadMap, route: tuple[str, ...], length_m: float) -> float:
+    """A generous time limit [s]: 5 m/s average plus 45 s for each signalised junction on the route."""
+    signals = sum(1 for e in route[:-1] if rmap.edge(e).getToNode().getType().startswith("traffic_light"))
+    return round(30.0 + length_m / 5.0 + 45.0 * signals, 1)
+
+
+def random_missions(rmap: RoadMap, rng: random.Random, network: str) -> Iterator[Scenario]:
+    """Endless random candidate seeds (unverified)."""
+    edges = [e for e in rmap.edge_ids(PASSENGER) if rmap.edge(e).getLength() >= 25.0]
+    if not edges:
+        return
+    while True:
+        start = rng.choice(edges)
+        goal = rng.choice(edges)
+        route = rmap.route(start, goal)
+        if route is None or len(route) < 2:
+            continue
+        start_len = rmap.edge(start).getLength()
+        goal_len = rmap.edge(goal).getLength()
+        start_pos = round(rng.uniform(5.0, max(5.0, min(start_len * 0.5, start_len - 15.0))), 1)
+        goal_pos = round(rng.uniform(min(12.0, goal_len / 2), max(12.0, goal_len - 12.0)), 1)
+        length = rmap.route_length(route, start_pos, goal_pos)
+        if not MIN_ROUTE_M <= length <= MAX_ROUTE_M:
+            continue
+        start_lanes = [l.getID() for l in rmap.edge(start).getLanes()
+                       if l.allows(PASSENGER) and any(c.getTo().getID() == route[1] for c in l.getOutgoing())]
+        lane = rng.choice(start_lanes) if start_lanes else rmap.drive_lane(start)
+        yield Scenario(
+            network=network,
+            mission=Mission(start_lane=lane, start_pos=start_pos, goal_edge=goal, goal_pos=goal_pos),
+            ads=AdsSpec(name="ego"),
+            seed=rng.randrange(2**31),
+            sim=SimOptions(time_limit=time_limit_for(rmap, route, length)),
+            name="seed",
+        )
+
+
+def verify(scenario: Scenario, oracles_factory: Callable[[], list]) -> tuple[bool, str]:
+    """Dry run with the reference ADS: (passed, reason)."""
+    from drivefuzz.ads import load_ads
+    from drivefuzz.execute import execute
+    from drivefuzz.oracle import Termination
+
+    ex = execute(scenario, ads=load_ads("ego"), oracles=oracles_factory())
+    if ex.misbehaviors:
+        m = ex.misbehaviors[0]
+        return False, f"{m.oracle}/{m.kind} at frame {m.frame}"
+    if ex.termination is not Termination.GOAL_REACHED:
+        return False, ex.termination.value
+    return True, "goal reached"
+
+
+def generate_seeds(network: str | Path, n: int, rng_seed: int = 0, *, verify_runs: bool = True,
+                   max_tries: int | None = None, log: Callable[[str], None] = lambda s: None) -> list[Scenario]:
+    """``n`` verified seeds for ``network`` (fewer if the network does not allow them)."""
+    from drivefuzz.oracle import OracleSettings
+    from drivefuzz.roadmap import load_roadmap
+
+    rmap = load_roadmap(network)
+    rng = random.Random(rng_seed)
+    out: list[Scenario] = []
+    tries = 0
+    max_tries = max_tries or 20 * n
+    settings = OracleSettings()
+    for cand in random_missions(rmap, rng, str(Path(network).resolve())):
+        if len(out) >= n or tries >= max_tries:
+            break
+        tries += 1
+        if verify_runs:
+            ok, why = verify(cand, settings.instantiate)
+            log(f"candidate {cand.mission.start_lane}->{cand.mission.goal_edge}: {'ok' if ok else 'rejected: ' + why}")
+            if not ok:
+                continue
+        out.append(cand.model_copy(update={"name": f"{rmap.name}-seed-{len(out):03d}"}))
+    return out
+
+
+def list_seeds(folder: str | Path) -> list[Path]:
+    """Seed folders (those holding scenario.json) under ``folder``, sorted."""
+    folder = Path(folder)
+    return sorted(p.parent for p in folder.glob("*/scenario.json"))
