@@ -230,6 +230,9 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
     else:
         if not network:
             raise InvalidConfig("fuzz", "NETWORK", "missing", "a .net.xml file, or --resume OUT")
+        from drivefuzz.roadmap import load_roadmap
+
+        load_roadmap(network)  # a bad network is the first thing to report
         config = load_config_file(config_file)
         fz = dict(config.get("fuzz", {}))
         ads_cfg = dict(config.get("ads", {}))

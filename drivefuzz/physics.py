@@ -1,50 +1,66 @@
 """Vehicle physics: a dynamic single-track (bicycle) model with friction-limited tyres.
 
 Every ADS under test drives the same simulated car; the executor calls
-:meth:`VehiclePhysics.step` once per simulation step and places the car in SUMO.
+:meth:`VehiclePhysics.step` once per simulation step (``dt`` 0.05 s or 0.1 s) and
+places the car in SUMO.
 
 Model
 -----
 * **Dynamic single-track model** in the body frame at the centre of gravity (CG):
   states ``vx`` (forward), ``vy`` (left), ``yaw_rate`` (CCW), plus the pose and the
-  rate-limited front road-wheel angle.
+  rate-limited front road-wheel angle.  Modelled on the CommonRoad single-track drift
+  model (STD) but without its wheel-spin states (see below).
 * **Lateral tyre force** per axle: simplified Pacejka magic formula
-  ``Fy = D sin(C atan(B a - E (B a - atan(B a))))`` with the peak ``D = mu * Fz``
-  (axle normal load ``Fz`` includes longitudinal load transfer).  The linear cornering
-  stiffness is specified *per unit normal load* (``tyre_stiffness_front/rear`` [1/rad],
-  ``C_alpha = k * Fz``) and ``B = k / (C * mu)``, so the small-slip behaviour does not
-  depend on friction while the saturation force and the slip angle at the peak scale
-  with ``mu`` -- on ice the tyres saturate early, on a dry road late.
-* **Longitudinal tyre force** (drive, brake) is demanded directly (an ideal
-  ABS / traction control, no wheel-spin states) and capped at
-  ``max_long_utilisation * mu * Fz`` per axle; brakes are distributed in proportion to
-  the axle loads (EBD).  **Combined slip** uses the friction ellipse:
-  the lateral force is scaled by ``sqrt(1 - (Fx / (mu Fz))^2)``.
+  ``Fy = D sin(C atan(B a - E (B a - atan(B a))))``, peak ``D = mu_eff * Fz`` with the
+  axle normal load ``Fz`` including longitudinal load transfer and
+  ``mu_eff = lateral_grip * mu * (1 - s (Fz - Fz_static) / Fz_static)`` (mild tyre
+  load sensitivity ``s``).  The linear cornering stiffness is given *per unit load*
+  (``tyre_stiffness_front/rear`` = ``C_alpha / Fz`` [1/rad]) and ``B = k / (C mu_eff)``:
+  the small-slip behaviour does not depend on friction, while the saturation force and
+  the slip angle of the peak scale with ``mu`` (on ice the tyres saturate early).
+  Beyond the peak the force falls to ``sin(C pi/2)`` (~0.81) of it.
+* **Limit balance**: a single-track model has no lateral load transfer, which is what
+  makes real cars understeer at the limit.  It is lumped into ``lateral_grip_front``
+  (0.9: the front axle's effective lateral friction); with it, and with the front-wheel
+  drive, the car understeers at the limit of a uniform surface (the front saturates and
+  the car runs wide) but spins when the rear is on a much slipperier surface.
+* **Longitudinal tyre forces** (drive, brake) are demanded directly (ideal ABS /
+  traction control, no wheel-spin states): brakes are distributed in proportion to the
+  axle loads (EBD), and each axle's force is capped at ``max_long_utilisation_* * mu_eff
+  * Fz``.  **Combined slip**: at the front the lateral force is scaled by the friction
+  ellipse ``sqrt(1 - (Fx / (mu_eff Fz))^2)`` (hard braking or driving costs steering);
+  the rear is lateral-priority (its brake force only gets the friction the lateral force
+  leaves, as EBD/ABS/ESC keep the rear stable), so braking in a bend does not spin the car.
 * **Resistances**: aerodynamic drag ``0.5 rho CdA vx^2`` and rolling resistance
-  ``c_rr m g``; with brakes they act as Coulomb-like resistances that can stop the car
-  but never reverse it (semi-implicit friction projection), so a braked car stops and
-  stays stopped.  Throttle only drives forward; there is no reverse gear.
-* **Integration**: fixed internal sub-steps ``h <= max_substep`` (``dt = 0.05`` ->
-  2 sub-steps of 25 ms).  The stiff lateral tyre dynamics (time constant ``~ m vx / C``
-  goes to zero as ``vx -> 0``) are integrated *linearly implicitly* (one Newton step of
-  implicit Euler with the tyre slopes clamped at >= 0), which is unconditionally stable;
-  longitudinal dynamics and the pose are semi-implicit Euler.
-* **Low speed**: below ``kinematic_blend_high`` (2 m/s) the lateral states are blended
-  towards the kinematic single-track model (``r = vx tan(delta) / L``,
-  ``vy = lr r``; the approach of the CommonRoad single-track drift model), fully
-  kinematic below ``kinematic_blend_low`` (1 m/s).  The pull towards the kinematic
-  state is limited by the available friction, so a slowly sliding car on ice keeps
-  sliding for a while instead of snapping onto its wheels.
+  ``c_rr m g``.  With the brakes they act as Coulomb-like resistances that can stop the
+  car but never reverse it (semi-implicit friction projection): a braked car stops and
+  stays exactly stopped.  Throttle only drives forward; there is no reverse gear.
+  (``vx`` can only go negative in a spin, when the car slides backwards.)
+* **Integration**: fixed internal sub-steps ``h = dt / ceil(dt / max_substep)``
+  (12.5 ms: 4 per 0.05 s step).  The stiff lateral tyre dynamics (time constant
+  ``~ m vx / C_alpha``, which vanishes as ``vx -> 0``) are integrated *linearly
+  implicitly* (one Newton step of implicit Euler, tyre slopes clamped at >= 0), which is
+  stable at any speed; the Coriolis coupling uses the updated lateral states (symplectic
+  Euler, so a fast spin neither gains nor loses energy numerically); the pose is
+  semi-implicit with the mid-point heading.
+* **Low speed**: between ``kinematic_blend_high`` (2 m/s) and ``kinematic_blend_low``
+  (1 m/s) the lateral states are blended (smoothstep in the speed) into the kinematic
+  single-track model ``r = vx tan(delta) / L``, ``vy = lr r`` (as the CommonRoad STD
+  model does).  The pull towards the kinematic state is limited by the available
+  friction, so a car sliding slowly on ice keeps sliding for a while.
 
-Why not the CommonRoad ``vehicle_dynamics_std`` itself: it needs wheel-spin states
-whose dynamics are very stiff (explicit steps <= 2 ms at low speed), and one evaluation
-of its right-hand side alone costs ~13 us in CPython, so a 0.05 s step costs
-0.3-2 ms (and ~0.7-2.2 ms with ``scipy.integrate.odeint`` as documented) against a
-budget of ~40 us.  This module is scalar pure-``math`` Python: ~10-15 us per 0.05 s step.
+Why not CommonRoad's ``vehicle_dynamics_std`` itself (measured, commonroad-vehicle-models
+3.0.2, CPython 3.11): one evaluation of its right-hand side costs ~13 us, and its
+wheel-spin states are so stiff that an explicit integrator needs <= 2 ms steps at low
+speed (10 ms at 15 m/s): 65-340 us per 0.05 s step with Euler, 130-1360 us with RK4, and
+0.75-2.2 ms with ``scipy.integrate.odeint`` as its documentation does -- against a
+budget of ~40 us.  This module is scalar pure-``math`` Python: ~16 us per 0.05 s step
+(``tools/bench_physics.py``).
 
-Conventions: SI units, angles in rad; heading ENU (0 = east, CCW positive); body frame
-x forward, y left; steering left-positive.  The state's ``x, y`` is the *geometric
-centre* of the body rectangle (what :mod:`drivefuzz.geometry` uses), not the CG.
+Conventions: SI units, angles in rad; heading ENU (0 = east, CCW positive, wrapped to
+[-pi, pi]); body frame x forward, y left; steering left-positive.  The state's ``x, y``
+is the *geometric centre* of the body rectangle (what :mod:`drivefuzz.geometry` uses),
+not the CG (``VehicleParams.centre_to_cg`` ahead of it).
 """
 
 from __future__ import annotations
@@ -67,7 +83,12 @@ _TWO_PI = 2.0 * math.pi
 
 @dataclass(frozen=True)
 class VehicleParams:
-    """Parameters of the simulated car (a ~1.5 t mid-size rear-wheel-drive saloon)."""
+    """Parameters of the simulated car: a ~1.5 t, 110 kW front-wheel-drive mid-size saloon.
+
+    Handling: understeer gradient ~0.0025 rad s^2/m (~1.4 deg/g, characteristic speed
+    ~34 m/s), lateral limit ~0.9 mu g, 0-100 km/h ~8 s, top speed ~63 m/s, full braking
+    ~8.6 m/s^2 on a dry road.
+    """
 
     length: float = 4.6  # [m] body
     width: float = 1.9  # [m]
@@ -89,15 +110,15 @@ class VehicleParams:
     drag_area: float = 0.65  # [m^2] Cd * A
     air_density: float = 1.2  # [kg/m^3]
     rolling_resistance: float = 0.012  # c_rr (force = c_rr m g)
-    # Tyres (per axle, two tyres lumped): magic-formula lateral force.
+    # Tyres (per axle, two tyres lumped): magic-formula lateral force, B = k / (C mu_eff).
     tyre_stiffness_front: float = 16.0  # [1/rad] cornering stiffness per unit load C_af / Fzf
     tyre_stiffness_rear: float = 26.0  # [1/rad] C_ar / Fzr (rear stiffer -> understeer)
     tyre_shape_front: float = 1.4  # Pacejka C (large-slip force = sin(C pi/2) ~ 0.81 peak)
     tyre_shape_rear: float = 1.4
-    lateral_grip_front: float = 0.9  # effective axle lateral friction / mu
-    lateral_grip_rear: float = 1.0
+    lateral_grip_front: float = 0.9  # effective axle lateral friction / mu (lumps the
+    lateral_grip_rear: float = 1.0  # lateral load transfer a single-track model lacks)
     tyre_load_sensitivity: float = 0.15  # mu_eff = mu (1 - s (Fz - Fz_static) / Fz_static)
-    tyre_curvature_front: float = 0.0  # Pacejka E
+    tyre_curvature_front: float = 0.0  # Pacejka E (< 1)
     tyre_curvature_rear: float = 0.0
     # Numerics
     max_substep: float = 0.0125  # [s] internal integration step (0.05 s -> 4 sub-steps)

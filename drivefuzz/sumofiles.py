@@ -123,7 +123,9 @@ def routes_xml(scenario: Scenario, route_edges: tuple[str, ...], ego=None) -> st
     _param(ego_el, "drivefuzz.role", "ego")
     entries: list[tuple[float, int, ET.Element]] = [(0.0, -1, ego_el)]
     for order, actor in enumerate(scenario.actors):
-        entries.append((actor.depart, order, _actor_element(actor)))
+        el = _actor_element(actor)
+        _param(el, "drivefuzz.order", order)  # the scenario's order; the file is sorted by depart
+        entries.append((actor.depart, order, el))
     # SUMO drops route entries that are out of depart order: sort (stable, ego first at t=0).
     entries.sort(key=lambda e: (e[0], e[1]))
     for _, _, el in entries:
@@ -303,7 +305,7 @@ def _read_routes(path: Path) -> tuple[Mission, list[Actor]]:
     root = _parse_xml(path)
     src = str(path)
     mission = None
-    actors: list[Actor] = []
+    actors: list[tuple[int, Actor]] = []
     for el in root:
         if el.tag not in ("vehicle", "trip", "person"):
             continue
@@ -316,7 +318,7 @@ def _read_routes(path: Path) -> tuple[Mission, list[Actor]]:
                                   start_speed=float(el.get("departSpeed", 0)))
                 continue
             dest_xy = params.get("drivefuzz.dest_xy")
-            actors.append(Actor(
+            actors.append((int(params.get("drivefuzz.order", len(actors))), Actor(
                 id=el.get("id"),
                 kind=ActorKind.PEDESTRIAN if el.tag == "person" else ActorKind.VEHICLE,
                 nav=NavType(params["drivefuzz.nav"]),
@@ -328,7 +330,7 @@ def _read_routes(path: Path) -> tuple[Mission, list[Actor]]:
                 dest_pos=float(params["drivefuzz.dest_pos"]) if "drivefuzz.dest_pos" in params else None,
                 dest_xy=tuple(float(v) for v in dest_xy.split(",")) if dest_xy else None,
                 maneuvers=tuple(Maneuver.model_validate(m) for m in json.loads(params.get("drivefuzz.maneuvers", "[]"))),
-            ))
+            )))
         except ValidationError as exc:
             raise _pydantic_error(src, exc, prefix=f"{el.tag}[{el.get('id')}]") from None
         except (KeyError, TypeError, AttributeError, ValueError) as exc:
@@ -337,7 +339,7 @@ def _read_routes(path: Path) -> tuple[Mission, list[Actor]]:
     if mission is None:
         raise InvalidScenario(src, "vehicle[ego]", "no ego vehicle",
                               'a <vehicle id="ego"> with <param key="drivefuzz.role" value="ego"/>')
-    return mission, actors
+    return mission, [a for _, a in sorted(actors, key=lambda p: p[0])]
 
 
 def _read_additional(path: Path) -> tuple[list[Puddle], Weather]:

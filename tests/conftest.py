@@ -1,0 +1,27 @@
+"""Shared fixtures: the repository's networks and small scenarios on them (real SUMO, no mocks)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+NETWORKS = ROOT / "networks"
+TOWN = NETWORKS / "town.net.xml"
+
+
+@pytest.fixture(scope="session")
+def town():
+    from drivefuzz.roadmap import load_roadmap
+
+    return load_roadmap(TOWN)
+
+
+@pytest.fixture
+def town_scenario(town):
+    from drivefuzz.scenario import Mission, Scenario, SimOptions
+
+    return Scenario(network=str(TOWN), mission=Mission(start_lane=town.drive_lane("A0B0"), start_pos=10.0,
+                                                       goal_edge="B0C0", goal_pos=40.0),
+                    sim=SimOptions(time_limit=60.0), seed=7)

@@ -1,0 +1,83 @@
+"""Bad input gives one line naming the file and the problem, exit code 2, no traceback."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import pytest
+from click.testing import CliRunner
+
+from drivefuzz.cli import main
+from drivefuzz.sumofiles import write_scenario
+
+from conftest import TOWN
+
+
+def _invoke(args):
+    result = CliRunner().invoke(main, args)
+    return result.exit_code, result.output, result.exception
+
+
+def _one_line_error(code, output, exc, *needles):
+    assert code == 2, output
+    lines = [l for l in output.splitlines() if l.strip()]
+    assert len(lines) == 1, output
+    assert "Traceback" not in output
+    for n in needles:
+        assert n in lines[0], lines[0]
+
+
+def test_missing_network(tmp_path):
+    _one_line_error(*_invoke(["fuzz", str(tmp_path / "no.net.xml"), "-o", str(tmp_path / "o")]), "no.net.xml", "no such network")
+
+
+def test_malformed_network(tmp_path):
+    bad = tmp_path / "bad.net.xml"
+    bad.write_text("<net><edge id='x'")
+    _one_line_error(*_invoke(["seed", str(bad), "-n", "1"]), "bad.net.xml", "not a readable SUMO network")
+
+
+def test_scenario_with_missing_edge(tmp_path, town_scenario):
+    write_scenario(town_scenario, tmp_path / "s")
+    routes = tmp_path / "s" / "routes.rou.xml"
+    routes.write_text(routes.read_text().replace("B0C0", "ZZZZ"))
+    _one_line_error(*_invoke(["run", str(tmp_path / "s")]), "scenario.json", "mission.goal_edge", "ZZZZ")
+
+
+def test_impossible_mission(tmp_path, town_scenario):
+    write_scenario(town_scenario, tmp_path / "s")
+    routes = tmp_path / "s" / "routes.rou.xml"
+    # the sidewalk lane: not a lane the ego may start on
+    routes.write_text(routes.read_text().replace('departLane="1"', 'departLane="0"'))
+    _one_line_error(*_invoke(["run", str(tmp_path / "s")]), "mission.start_lane", "does not allow passenger")
+
+
+def test_malformed_scenario_json(tmp_path, town_scenario):
+    write_scenario(town_scenario, tmp_path / "s")
+    (tmp_path / "s" / "scenario.json").write_text("{ not json")
+    _one_line_error(*_invoke(["run", str(tmp_path / "s")]), "scenario.json", "not valid JSON")
+
+
+def test_malformed_routes_xml(tmp_path, town_scenario):
+    write_scenario(town_scenario, tmp_path / "s")
+    (tmp_path / "s" / "routes.rou.xml").write_text("<routes><vehicle")
+    _one_line_error(*_invoke(["run", str(tmp_path / "s")]), "routes.rou.xml", "malformed XML")
+
+
+def test_bad_friction_in_additional(tmp_path, town_scenario):
+    from drivefuzz.scenario import Puddle
+
+    write_scenario(town_scenario.model_copy(update={"puddles": (Puddle(x=1, y=1, length=2, width=2, friction=0.5),)}), tmp_path / "s")
+    add = tmp_path / "s" / "fuzz.add.xml"
+    add.write_text(add.read_text().replace('key="drivefuzz.friction" value="0.5"', 'key="drivefuzz.friction" value="3.5"'))
+    _one_line_error(*_invoke(["run", str(tmp_path / "s")]), "fuzz.add.xml", "friction")
+
+
+def test_bad_config_file_and_options(tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[fuzz\ncycles=")
+    _one_line_error(*_invoke(["fuzz", str(TOWN), "--config", str(cfg), "-o", str(tmp_path / "o")]), "c.toml", "cannot parse")
+    _one_line_error(*_invoke(["fuzz", str(TOWN), "--oracle", "speeding.nope=1", "-o", str(tmp_path / "o")]), "speeding.nope")
+    _one_line_error(*_invoke(["fuzz", str(TOWN), "--ads", "nosuch", "-o", str(tmp_path / "o")]), "no ADS plugin")
+    _one_line_error(*_invoke(["fuzz", str(TOWN), "--budget", "soon", "-o", str(tmp_path / "o")]), "--budget")
