@@ -328,8 +328,9 @@ class VehiclePhysics:
         ``steer`` in [-1, 1] is the commanded fraction of ``max_road_wheel_angle`` (left
         positive; the actuator is rate limited), ``throttle`` and ``brake`` in [0, 1];
         inputs are clipped and NaN counts as 0.  ``mu_front``/``mu_rear`` is the friction
-        under each axle (clipped to [0.01, 2]); ``wind_force_lat`` [N] acts sideways at the CG
-        (left positive).
+        under each axle (clipped to [0.01, 2]; NaN -> 0.01); ``wind_force_lat`` [N] acts
+        sideways at the CG (left positive; below ``kinematic_blend_low`` the tyres hold it).
+        ``dt`` must be > 0; any value works (internal sub-steps of <= ``max_substep``).
         """
         dt = float(dt)
         if not (dt > 0.0 and dt < 1e6):
@@ -412,6 +413,7 @@ class VehiclePhysics:
         sin = math.sin
         cos = math.cos
         sqrt = math.sqrt
+        hypot = math.hypot
 
         for _ in range(n):
             # -- steering actuator (rate limited)
@@ -440,7 +442,7 @@ class VehiclePhysics:
             capr = mur * fzr * (t if t > 0.2 else 0.2)
 
             # -- blend weight dynamic / kinematic
-            v = math.hypot(vx, vy)
+            v = hypot(vx, vy)
             if v >= v_hi:
                 w = 1.0
             elif v <= v_lo:

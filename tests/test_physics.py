@@ -216,7 +216,7 @@ def test_property_random_controls_any_friction(v0, dt, mu_f, mu_r, wind, segment
             s = ph.step(steer, throttle, brake, dt, mu_f, mu_r, wind)
             assert _finite(s)
             assert s.speed < 70.0
-            assert abs(s.yaw_rate) < 8.0
+            assert abs(s.yaw_rate) < 12.0  # a pirouette on slicks-front / ice-rear is fast
 
 
 # ------------------------------------------------------------------------ 5. oversteer
@@ -232,6 +232,17 @@ def test_rear_on_ice_oversteers_and_spins_up():
     # on a uniformly dry road the same manoeuvre stays close to the linear value
     dry = _corner(v, steer, 1.0, 1.0, 4.0)
     assert max(abs(s.yaw_rate) for s in dry) < 1.2 * r_dry
+
+
+def test_full_spin_then_brake_stops_and_stays():
+    ph = VehiclePhysics(P, place_state(0.0, 0.0, 0.0, 25.0, P))
+    seen_backwards = False
+    for i in range(300):
+        s = ph.step(0.3 if i < 40 else 0.0, 0.0, 0.0 if i < 40 else 1.0, 0.05, 1.0, 0.1)
+        assert _finite(s) and s.speed <= 25.0 + 1e-9  # no energy from nowhere
+        seen_backwards |= s.vx < -1.0
+    assert seen_backwards  # the spin went past 90 deg: the car slid backwards
+    assert (s.vx, s.vy, s.yaw_rate) == (0.0, 0.0, 0.0)
 
 
 # ------------------------------------------------------------- 6. coasting / standstill

@@ -1,0 +1,178 @@
+"""Immobility: the ego stands still for too long without a legitimate reason."""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+from pydantic import Field
+
+from drivefuzz.oracle import Frame, Misbehavior, Oracle, RunContext
+from oracles import STOP_STATES
+
+
+class ImmobilityOracle(Oracle):
+    """Fires when the ego has been stopped without a legitimate reason for longer than ``threshold``.
+
+    The ego is *stopped* while ``frame.speed < stop_speed``. The timer counts
+    consecutive stopped frames that have no legitimate reason; it restarts at
+    zero whenever the ego moves or a legitimate reason applies (so a stop that
+    stays illegitimate after a legitimate wait, e.g. not going on green, is
+    timed from the moment the reason ended). The record is made when the timer
+    exceeds ``threshold`` (once per stop).
+
+    A stop is legitimate in a frame when one of these holds (checked in order):
+
+    1. **Goal**: the ego is within ``goal_distance`` of the goal point.
+    2. **Red light**: the next traffic light on the route (``frame.next_tls``)
+       shows red, red-yellow or yellow (``r``, ``u``, ``y``, ``Y``) and its stop
+       line is at most ``red_light_distance`` ahead of the front bumper; or the
+       ego is on a signalised lane (``frame.lane_links``) whose vehicle links all
+       show one of those states and the lane end is at most
+       ``red_light_distance`` ahead.
+    3. **Pedestrian**: a pedestrian is in the ego's path ahead: its centre is
+       between the ego's front bumper and ``pedestrian_distance`` beyond it
+       along the ego's heading, and at most ``ego_width / 2 +
+       pedestrian_lateral`` to either side of the ego's axis (a pedestrian on
+       the crossing in front, or on the road).
+    4. **Queue**: the nearest vehicle ahead (centre ahead of the ego's front
+       bumper along the heading, at most ``queue_lateral`` to either side of
+       the ego's axis, bumper gap at most ``queue_gap``) is either moving
+       (``speed >= stop_speed``: the ego is in a moving queue) or is itself
+       legitimately stopped, judged from its own pose by the same rules: its
+       front within ``red_light_distance`` of the stop line of the ego's next
+       traffic light while that shows a stop state (it waits at the red light
+       the ego approaches), a pedestrian in its path, or a legitimately stopped
+       or moving vehicle ahead of it (recursively, up to ``max_queue`` vehicles).
+
+    Not legitimate, among others: standing behind a vehicle that never moves
+    (a broken-down or ``immobile`` car with no light or pedestrian in front of
+    it: an ADS should pass it), stopping on green, stopping in the middle of
+    the road or at the side of the road away from the goal.
+
+    Kind ``"immobile"``; details: ``stopped_for`` [s] (illegitimately),
+    ``since`` [s] (simulation time the illegitimate stop began), ``lane``.
+    """
+
+    name = "immobility"
+    description = "The ego stands still too long without a legitimate reason (red light, pedestrian, queue, goal)."
+
+    class Config(Oracle.Config):
+        threshold: float = Field(60.0, gt=0.0, description="[s] of illegitimate standstill before firing")
+        stop_speed: float = Field(0.1, gt=0.0, description="[m/s] below which the ego counts as stopped")
+        red_light_distance: float = Field(30.0, ge=0.0, description="[m] stop line ahead of the front bumper")
+        pedestrian_distance: float = Field(20.0, ge=0.0, description="[m] ahead of the front bumper")
+        pedestrian_lateral: float = Field(1.5, ge=0.0, description="[m] beside the ego's body")
+        queue_gap: float = Field(10.0, ge=0.0, description="[m] bumper gap to the vehicle ahead")
+        queue_lateral: float = Field(1.6, ge=0.0, description="[m] centre offset from the axis")
+        max_queue: int = Field(30, ge=1, description="vehicles followed along a queue")
+        goal_distance: float = Field(5.0, ge=0.0, description="[m] from the goal point")
+
+    def reset(self, ctx: RunContext) -> None:
+        super().reset(ctx)
+        c = self.config
+        self._stop = float(c.stop_speed)
+        self._threshold = float(c.threshold)
+        self._since: float | None = None
+        self._fired = False
+        self._half_len = 0.5 * float(ctx.ego_length)
+        self._half_wid = 0.5 * float(ctx.ego_width)
+        self._rmap = ctx.roadmap
+        self._lane_len: dict[str, float] = {}
+
+    def on_frame(self, frame: Frame) -> Sequence[Misbehavior]:
+        if frame.speed >= self._stop:
+            self._since = None
+            self._fired = False
+            return ()
+        if self._fired:
+            return ()
+        if self.legitimate(frame) is not None:
+            self._since = None
+            return ()
+        if self._since is None:
+            self._since = frame.t
+            return ()
+        stopped = frame.t - self._since
+        if stopped <= self._threshold:
+            return ()
+        self._fired = True
+        return (self.report(frame, "immobile", (), stopped_for=round(stopped, 3), since=round(self._since, 3),
+                            lane=frame.lane),)
+
+    # ------------------------------------------------------------------ reasons
+    def legitimate(self, frame: Frame) -> str | None:
+        """The legitimate reason the ego stands still in ``frame`` (``None``: there is none)."""
+        c = self.config
+        if frame.goal_dist <= c.goal_distance:
+            return "goal"
+        red = self._red_ahead(frame)
+        if red is not None and red <= c.red_light_distance:
+            return "red_light"
+        n = len(frame.actor_ids)
+        if not n:
+            return None
+        kinds = frame.actor_kinds
+        ax, ay = frame.actor_x, frame.actor_y
+        ped = np.fromiter((k == "pedestrian" for k in kinds), dtype=bool, count=n)
+        h = frame.heading
+        if self._blocked_by_pedestrian(frame.x, frame.y, h, self._half_len, self._half_wid, ax, ay, ped):
+            return "pedestrian"
+        # vehicles: follow the queue ahead
+        veh = ~ped
+        if not veh.any():
+            return None
+        vx, vy = ax[veh], ay[veh]
+        vh, vs = frame.actor_heading[veh], frame.actor_speed[veh]
+        vl, vw = frame.actor_length[veh], frame.actor_width[veh]
+        ch, sh = math.cos(h), math.sin(h)
+        px, py, phl, phw, ph = frame.x, frame.y, self._half_len, self._half_wid, h
+        visited: set[int] = set()
+        for _ in range(c.max_queue):
+            cp, sp = math.cos(ph), math.sin(ph)
+            dx, dy = vx - px, vy - py
+            along = dx * cp + dy * sp
+            lat = -dx * sp + dy * cp
+            gap = along - phl - 0.5 * vl
+            ok = (along > phl) & (np.abs(lat) <= c.queue_lateral) & (gap <= c.queue_gap)
+            idx = [int(i) for i in np.flatnonzero(ok) if int(i) not in visited]
+            if not idx:
+                return None
+            k = min(idx, key=lambda i: along[i])
+            visited.add(k)
+            if vs[k] >= self._stop:
+                return "queue"
+            lx, ly, lh, lhl, lhw = float(vx[k]), float(vy[k]), float(vh[k]), 0.5 * float(vl[k]), 0.5 * float(vw[k])
+            if red is not None:
+                # the leader's front, projected on the ego's heading, ahead of the ego's front bumper
+                lead_front = (lx - frame.x) * ch + (ly - frame.y) * sh + lhl - self._half_len
+                if red - lead_front <= c.red_light_distance:
+                    return "queue"
+            if self._blocked_by_pedestrian(lx, ly, lh, lhl, lhw, ax, ay, ped):
+                return "queue"
+            px, py, ph, phl, phw = lx, ly, lh, lhl, lhw
+        return None
+
+    def _red_ahead(self, frame: Frame) -> float | None:
+        """Distance [m] from the front bumper to a stop line ahead showing a stop state, or None."""
+        nt = frame.next_tls
+        if nt is not None and nt[3] in STOP_STATES:
+            return float(nt[2])
+        links = frame.lane_links
+        if links and all(l.state in STOP_STATES for l in links) and frame.lane_pos == frame.lane_pos:
+            length = self._lane_len.get(frame.lane)
+            if length is None:
+                length = self._lane_len[frame.lane] = float(self._rmap.geom(frame.lane).length)
+            return max(length - frame.lane_pos, 0.0)
+        return None
+
+    def _blocked_by_pedestrian(self, x, y, h, hl, hw, ax, ay, ped) -> bool:
+        if not ped.any():
+            return False
+        c = self.config
+        cp, sp = math.cos(h), math.sin(h)
+        dx, dy = ax[ped] - x, ay[ped] - y
+        along = dx * cp + dy * sp - hl
+        lat = np.abs(-dx * sp + dy * cp)
+        return bool(((along >= 0.0) & (along <= c.pedestrian_distance) & (lat <= hw + c.pedestrian_lateral)).any())

@@ -1,0 +1,442 @@
+"""Lane invasion: the ego's body crosses a boundary it may not cross."""
+
+from __future__ import annotations
+
+import bisect
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+from pydantic import Field
+
+from drivefuzz.oracle import Frame, Misbehavior, Oracle, RunContext
+from drivefuzz.roadmap import PASSENGER, PEDESTRIAN
+from oracles import wrap_angle
+
+#: Grid cell [m] of the lane-segment index.
+_CELL = 8.0
+#: Lateral reach [m] beyond a lane's half width for which a segment is indexed (>= any sane tolerance).
+_REACH = 1.5
+#: Heading difference above which a lane runs against the ego.
+_OPPOSITE = math.radians(135.0)
+#: Severity order when corners disagree.
+_SEVERITY = {"opposite_lane": 4, "sidewalk": 3, "solid_line": 2, "off_road": 1}
+
+
+@dataclass
+class _Lane:
+    id: str
+    edge: str
+    index: int
+    width: float
+    passenger: bool
+    pedestrian: bool
+    from_node: str
+    to_node: str
+    # per segment: x0, y0, ux, uy, length, cumulative start, heading
+    segs: list[tuple[float, float, float, float, float, float, float]] = field(default_factory=list)
+    starts: list[float] = field(default_factory=list)  # cumulative start of every segment
+    total: float = 0.0
+    change_left: bool = True  # passenger cars may change to the lane on the left
+    change_right: bool = True
+
+    def seg_at(self, s: float) -> int:
+        return min(max(bisect.bisect_right(self.starts, s) - 1, 0), len(self.segs) - 1)
+
+    def distance(self, x: float, y: float, i0: int = 0, i1: int | None = None) -> tuple[float, float]:
+        """(distance [m] from the centre line, heading there) for a point beside the lane, inf if
+        it lies before the lane start or after its end. Only segments i0..i1 are searched."""
+        best, head = math.inf, 0.0
+        last = len(self.segs) - 1
+        for i in range(i0, last + 1 if i1 is None else min(i1, last) + 1):
+            x0, y0, ux, uy, ln, _c, h = self.segs[i]
+            px, py = x - x0, y - y0
+            t = px * ux + py * uy
+            if t < 0.0:
+                if i == 0:
+                    continue
+                t = 0.0
+            elif t > ln:
+                if i == last:
+                    continue
+                t = ln
+            d = math.hypot(px - t * ux, py - t * uy)
+            if d < best:
+                best, head = d, h
+        return best, head
+
+
+def _passenger_may(value: str | None) -> bool:
+    """Whether a SUMO changeLeft/changeRight permission list lets passenger cars change."""
+    if value is None:
+        return True
+    tokens = set(value.split())
+    return bool(tokens & {"all", "passenger", "private"}) if tokens else False
+
+
+class _NetIndex:
+    """Per-network, read-only geometry for the oracle (built once per process and network)."""
+
+    def __init__(self, rmap):
+        net = rmap.net
+        self.lanes: dict[str, _Lane] = {}
+        change = self._lane_change_permissions(str(rmap.path))
+        for e in net.getEdges(withInternal=False):
+            if e.getFunction() != "":
+                continue
+            fr, to = e.getFromNode().getID(), e.getToNode().getID()
+            for ln in e.getLanes():
+                pts = [(float(p[0]), float(p[1])) for p in ln.getShape()]
+                lane = _Lane(ln.getID(), e.getID(), ln.getIndex(), float(ln.getWidth()),
+                             bool(ln.allows(PASSENGER)), bool(ln.allows(PEDESTRIAN)), fr, to)
+                cum = 0.0
+                for (x0, y0), (x1, y1) in zip(pts[:-1], pts[1:]):
+                    d = math.hypot(x1 - x0, y1 - y0)
+                    if d < 1e-9:
+                        continue
+                    lane.segs.append((x0, y0, (x1 - x0) / d, (y1 - y0) / d, d, cum, math.atan2(y1 - y0, x1 - x0)))
+                    lane.starts.append(cum)
+                    cum += d
+                lane.total = cum
+                if not lane.segs:
+                    continue
+                left, right = change.get(lane.id, (None, None))
+                lane.change_left, lane.change_right = _passenger_may(left), _passenger_may(right)
+                self.lanes[lane.id] = lane
+        self.edge_lanes: dict[str, list[_Lane]] = {}
+        for lane in self.lanes.values():
+            self.edge_lanes.setdefault(lane.edge, []).append(lane)
+        for lanes in self.edge_lanes.values():
+            lanes.sort(key=lambda l: l.index)
+        # the reverse of every edge: same nodes, swapped
+        by_nodes: dict[tuple[str, str], set[str]] = {}
+        for lane in self.lanes.values():
+            by_nodes.setdefault((lane.from_node, lane.to_node), set()).add(lane.edge)
+        self.reverse: dict[str, frozenset[str]] = {}
+        for (fr, to), edges in by_nodes.items():
+            rev = frozenset(by_nodes.get((to, fr), ()))
+            for e in edges:
+                self.reverse[e] = rev
+        # grid of lane segments
+        self.grid: dict[tuple[int, int], list[tuple[_Lane, int]]] = {}
+        for lane in self.lanes.values():
+            r = 0.5 * lane.width + _REACH
+            for i, (x0, y0, ux, uy, ln, _c, _h) in enumerate(lane.segs):
+                x1, y1 = x0 + ux * ln, y0 + uy * ln
+                for cx in range(int(math.floor((min(x0, x1) - r) / _CELL)), int(math.floor((max(x0, x1) + r) / _CELL)) + 1):
+                    for cy in range(int(math.floor((min(y0, y1) - r) / _CELL)),
+                                    int(math.floor((max(y0, y1) + r) / _CELL)) + 1):
+                        self.grid.setdefault((cx, cy), []).append((lane, i))
+        # junction areas a car may drive on: junction shapes minus walking areas; walking areas
+        from shapely.geometry import LineString, Polygon
+        from shapely.ops import unary_union
+
+        junctions, walks = [], []
+        for node in net.getNodes():
+            shape = node.getShape()
+            if len(shape) >= 3:
+                poly = Polygon([(p[0], p[1]) for p in shape]).buffer(0)
+                if poly.area > 0:
+                    junctions.append(poly)
+        for e in net.getEdges(withInternal=True):
+            func = e.getFunction()
+            if func == "walkingarea":
+                for ln in e.getLanes():
+                    shape = ln.getShape()
+                    if len(shape) >= 3:
+                        poly = Polygon([(p[0], p[1]) for p in shape]).buffer(0)
+                        if poly.area > 0:
+                            walks.append(poly)
+            elif func == "internal":
+                # junction lanes for cars: drivable even where the junction shape is small
+                for ln in e.getLanes():
+                    shape = ln.getShape()
+                    if ln.allows(PASSENGER) and len(shape) >= 2:
+                        line = LineString([(p[0], p[1]) for p in shape])
+                        if line.length > 1e-6:
+                            junctions.append(line.buffer(0.5 * ln.getWidth(), cap_style="flat"))
+        self.walk = unary_union(walks) if walks else None
+        self.drivable = None
+        if junctions:
+            self.drivable = unary_union(junctions)
+            if self.walk is not None:
+                self.drivable = self.drivable.difference(self.walk)
+        self._drivable_tol: dict[float, object] = {}
+
+    def drivable_within(self, tol: float):
+        """The drivable junction area grown by ``tol`` (prepared), or None."""
+        g = self._drivable_tol.get(tol)
+        if g is None and self.drivable is not None:
+            import shapely
+
+            g = self.drivable.buffer(tol) if tol > 0 else self.drivable
+            shapely.prepare(g)
+            self._drivable_tol[tol] = g
+        return g
+
+    @staticmethod
+    def _lane_change_permissions(path: str) -> dict[str, tuple[str | None, str | None]]:
+        """lane id -> (changeLeft, changeRight) attributes (sumolib does not expose them)."""
+        out: dict[str, tuple[str | None, str | None]] = {}
+        for _ev, el in ET.iterparse(path, events=("end",)):
+            if el.tag == "lane":
+                left, right = el.get("changeLeft"), el.get("changeRight")
+                if left is not None or right is not None:
+                    out[el.get("id", "")] = (left, right)
+            elif el.tag in ("edge", "junction", "connection", "tlLogic"):
+                el.clear()
+        return out
+
+    def lanes_at(self, x: float, y: float) -> dict[str, tuple[_Lane, float, float]]:
+        """lane id -> (lane, distance from its centre line, lane heading there) for lanes indexed near (x, y)."""
+        cell = self.grid.get((int(math.floor(x / _CELL)), int(math.floor(y / _CELL))))
+        out: dict[str, tuple[_Lane, float, float]] = {}
+        if not cell:
+            return out
+        for lane, i in cell:
+            d, h = lane.distance(x, y, i, i)
+            if d == math.inf:
+                continue
+            prev = out.get(lane.id)
+            if prev is None or d < prev[1]:
+                out[lane.id] = (lane, d, h)
+        return out
+
+
+_INDEX: dict[tuple[str, float], _NetIndex] = {}
+
+
+def _index(rmap) -> _NetIndex:
+    import os
+
+    p = str(rmap.path)
+    key = (p, os.path.getmtime(p))
+    idx = _INDEX.get(key)
+    if idx is None:
+        idx = _INDEX[key] = _NetIndex(rmap)
+    return idx
+
+
+class LaneInvasionOracle(Oracle):
+    """Fires when the ego's body crosses a boundary it may not cross.
+
+    Every frame the four corners of the ego's footprint (from ``frame.x/y/heading``
+    and ``ctx.ego_length/width``) are tested against the road map:
+
+    - A corner is **fine** when it lies in a junction's drivable area (the
+      junction shape minus its walking areas, grown by ``tolerance``), or
+      within ``tolerance`` of the lateral bounds of an *allowed* lane: a lane
+      of a normal edge that allows passenger cars, does not run against the
+      ego, and is not across a forbidden lane boundary from the ego's lane.
+    - A lane **runs against the ego** when its edge is the reverse (same nodes,
+      swapped) of the edge the ego drives on (the last edge it was on in its
+      own direction and, when that edge is on the route, the next route edge),
+      or when its direction differs from the ego's heading by more than 135
+      degrees.
+    - The ego's **own lane** on an edge is the last lane that held the whole
+      body (within ``tolerance``); until there is one, the lane SUMO puts the
+      ego on. A lane of the same edge is across a **forbidden boundary** when
+      passenger cars may not change from the own lane towards it (SUMO's
+      ``changeLeft``/``changeRight`` lane attributes, read from the net file;
+      absent means allowed). Lane changes across dashed boundaries are legal.
+    - A corner that is not fine is a violation, named by what it lies in
+      (strictly, without tolerance), most severe first: an opposite lane
+      (``"opposite_lane"``), a sidewalk or walking area (``"sidewalk"``: a lane
+      for pedestrians but not cars), a lane behind a forbidden boundary
+      (``"solid_line"``), anything else: outside every lane and junction, or a
+      lane cars may not use (``"off_road"``).
+
+    Fast path: while the ego is on a normal lane with its whole body within
+    that lane's bounds (and ``tolerance``), the frame costs one projection per
+    corner on the lane's nearest segment. Junction internal lanes (ids starting
+    with ``:``) are not used: the junction polygon covers them.
+
+    One record per episode: after a record the oracle is silent until all
+    corners were fine again. Kinds ``"opposite_lane"``, ``"sidewalk"``,
+    ``"off_road"``, ``"solid_line"``; details: ``lane`` (the lane the worst corner
+    lies in, ``""`` if none), ``corner`` (0 front-right, 1 front-left, 2 rear-left,
+    3 rear-right), ``corner_xy``, ``depth`` [m] (how far the corner is beyond the
+    tolerance band of the nearest allowed lane, when known), ``ego_lane``.
+    """
+
+    name = "lane_invasion"
+    description = "The ego's body enters an opposite lane, a sidewalk, leaves the road, or crosses a solid line."
+
+    class Config(Oracle.Config):
+        tolerance: float = Field(0.2, ge=0.0, le=1.0, description="[m] a corner may stick out of its lane or junction")
+        junction_tolerance: float = Field(0.5, ge=0.0, le=2.0,
+                                          description="[m] the same while part of the body is on a junction")
+
+    def reset(self, ctx: RunContext) -> None:
+        super().reset(ctx)
+        self._idx = _index(ctx.roadmap)
+        self._tol = float(self.config.tolerance)
+        self._jtol = float(self.config.junction_tolerance)
+        self._drivable = self._idx.drivable_within(self._tol)
+        self._hl = 0.5 * float(ctx.ego_length)
+        self._hw = 0.5 * float(ctx.ego_width)
+        self._reach = self._hl + self._hw
+        self._route = tuple(ctx.route)
+        self._route_next = {e: self._route[i + 1] for i, e in enumerate(self._route[:-1])}
+        self._home_lane: _Lane | None = None  # the lane that last held the whole body
+        self._ref: frozenset[str] = frozenset()  # edges the ego drives along now
+        self._against: frozenset[str] = frozenset()  # their reverse edges
+        self._ref_edge = ""
+        self._episode = False
+
+    # ------------------------------------------------------------------ frame
+    def on_frame(self, frame: Frame) -> Sequence[Misbehavior]:
+        lane = self._idx.lanes.get(frame.lane) if frame.lane else None
+        h = frame.heading
+        c, s = math.cos(h), math.sin(h)
+        hl, hw = self._hl, self._hw
+        x, y = frame.x, frame.y
+        if lane is not None:
+            segs = lane.segs
+            if len(segs) == 1:
+                x0, y0, ux, uy, ln, _c, _h = segs[0]
+            else:
+                s0 = frame.lane_pos - hl if frame.lane_pos == frame.lane_pos else 0.0
+                x0, y0, ux, uy, ln, _c, _h = segs[lane.seg_at(s0)]
+            cos_d = c * ux + s * uy  # cos / sin of the heading relative to the lane
+            if cos_d > 0.0:
+                if lane.edge != self._ref_edge:
+                    self._set_ref(lane.edge)
+                if lane.passenger:
+                    if len(segs) == 1:
+                        # a rectangle in a straight strip: exact, without corners
+                        sin_d = s * ux - c * uy
+                        qx, qy = x - x0, y - y0
+                        t = qx * ux + qy * uy
+                        lat = qx * uy - qy * ux
+                        ext_lat = hl * abs(sin_d) + hw * cos_d
+                        ext_lon = hl * cos_d + hw * abs(sin_d)
+                        ok = (abs(lat) + ext_lat <= 0.5 * lane.width + self._tol
+                              and t - ext_lon >= 0.0 and t + ext_lon <= ln)
+                    else:
+                        ok = self._inside_curved(lane, frame, self._corners(x, y, c, s))
+                    if ok:
+                        if self._home_lane is not lane:
+                            self._home_lane = lane
+                        self._episode = False
+                        return ()
+        return self._slow(frame, self._corners(x, y, c, s), lane)
+
+    def _corners(self, x: float, y: float, c: float, s: float):
+        """Front-right, front-left, rear-left, rear-right."""
+        fx, fy, lx, ly = self._hl * c, self._hl * s, -self._hw * s, self._hw * c
+        return ((x + fx - lx, y + fy - ly), (x + fx + lx, y + fy + ly),
+                (x - fx + lx, y - fy + ly), (x - fx - lx, y - fy - ly))
+
+    def _inside_curved(self, lane: _Lane, frame: Frame, pts) -> bool:
+        lim = 0.5 * lane.width + self._tol
+        s0 = frame.lane_pos - self._hl if frame.lane_pos == frame.lane_pos else 0.0
+        i0, i1 = lane.seg_at(s0 - self._reach - 1.0), lane.seg_at(s0 + self._reach + 1.0)
+        for px, py in pts:
+            if lane.distance(px, py, i0, i1)[0] > lim:
+                return False
+        return True
+
+    def _set_ref(self, edge: str) -> None:
+        self._ref_edge = edge
+        ref = {edge}
+        nxt = self._route_next.get(edge)
+        if nxt is not None:
+            ref.add(nxt)
+        self._ref = frozenset(ref)
+        against: set[str] = set()
+        for e in ref:
+            against |= self._idx.reverse.get(e, frozenset())
+        self._against = frozenset(against)
+
+    def _slow(self, frame: Frame, pts, lane) -> Sequence[Misbehavior]:
+        tol = self._tol
+        if self._drivable is not None:
+            import shapely
+
+            xs = np.fromiter((p[0] for p in pts), float, 4)
+            ys = np.fromiter((p[1] for p in pts), float, 4)
+            in_junction = shapely.contains_xy(self._drivable, xs, ys)
+        else:
+            in_junction = np.zeros(4, dtype=bool)
+        home = self._home_lane
+        if home is not None and lane is not None and lane.edge != home.edge:
+            home = None
+        if home is None and lane is not None and not in_junction.any():
+            # no lane of this edge has held the whole body yet: once the body has left the
+            # junction, the lane SUMO puts the ego on is its own (a turn may end straddling)
+            home = lane
+        # entering or leaving a junction, a turning body sweeps across the lines that start there
+        tol_lane = max(tol, self._jtol) if in_junction.any() else tol
+        worst = None  # (severity, kind, corner, lane id, depth)
+        for i, (px, py) in enumerate(pts):
+            if in_junction[i]:
+                continue
+            if home is not None and home.passenger and home.edge not in self._against:
+                d, lh = home.distance(px, py)
+                if d <= 0.5 * home.width + tol_lane and abs(wrap_angle(frame.heading - lh)) <= _OPPOSITE:
+                    continue  # in the ego's own lane: fine
+            found = self._idx.lanes_at(px, py)
+            fine = False
+            best_kind, best_lane, best_sev = "off_road", "", 0
+            nearest_ok = math.inf
+            for ln, d, lh in found.values():
+                half = 0.5 * ln.width
+                if d > half + _REACH:
+                    continue
+                opposite = ln.edge in self._against or abs(wrap_angle(frame.heading - lh)) > _OPPOSITE
+                if ln.passenger and not opposite:
+                    solid = home is not None and ln.edge == home.edge and not self._may_change(ln, home.index)
+                    if not solid:
+                        if d <= half + tol_lane:
+                            fine = True
+                            break
+                        nearest_ok = min(nearest_ok, d - half - tol_lane)
+                        continue
+                    kind = "solid_line"
+                elif ln.passenger:
+                    kind = "opposite_lane"
+                elif ln.pedestrian:
+                    kind = "sidewalk"
+                else:
+                    kind = "off_road"
+                if d <= half:
+                    sev = _SEVERITY[kind]
+                    if sev > best_sev:
+                        best_kind, best_lane, best_sev = kind, ln.id, sev
+            if fine:
+                continue
+            if best_sev == 0:
+                if self._idx.walk is not None:
+                    import shapely
+
+                    if shapely.contains_xy(self._idx.walk, px, py):
+                        best_kind, best_sev = "sidewalk", _SEVERITY["sidewalk"]
+                if best_sev == 0:
+                    best_sev = _SEVERITY["off_road"]
+            if worst is None or best_sev > worst[0]:
+                worst = (best_sev, best_kind, i, best_lane, nearest_ok)
+        if worst is None:
+            if home is not None and home is not self._home_lane and home.passenger:
+                self._home_lane = home
+            self._episode = False
+            return ()
+        if self._episode:
+            return ()
+        self._episode = True
+        _sev, kind, i, lane_id, depth = worst
+        return (self.report(frame, kind, (), lane=lane_id, corner=i,
+                            corner_xy=(round(pts[i][0], 3), round(pts[i][1], 3)),
+                            depth=None if depth == math.inf else round(depth, 3), ego_lane=frame.lane),)
+
+    def _may_change(self, target: _Lane, home_index: int) -> bool:
+        """Passenger cars may change from lane ``home_index`` of ``target``'s edge to ``target``."""
+        if target.index == home_index:
+            return True
+        lanes = self._idx.edge_lanes.get(target.edge, ())
+        by_index = {l.index: l for l in lanes}
+        if target.index > home_index:  # to the left
+            return all(by_index[k].change_left for k in range(home_index, target.index) if k in by_index)
+        return all(by_index[k].change_right for k in range(target.index + 1, home_index + 1) if k in by_index)
