@@ -81,3 +81,47 @@ def test_bad_config_file_and_options(tmp_path):
     _one_line_error(*_invoke(["fuzz", str(TOWN), "--oracle", "speeding.nope=1", "-o", str(tmp_path / "o")]), "speeding.nope")
     _one_line_error(*_invoke(["fuzz", str(TOWN), "--ads", "nosuch", "-o", str(tmp_path / "o")]), "no ADS plugin")
     _one_line_error(*_invoke(["fuzz", str(TOWN), "--budget", "soon", "-o", str(tmp_path / "o")]), "--budget")
+
+
+def _edit(tmp_path, town_scenario, fname, old, new, **update):
+    write_scenario(town_scenario.model_copy(update=update), tmp_path / "s")
+    f = tmp_path / "s" / fname
+    text = f.read_text()
+    assert old in text
+    f.write_text(text.replace(old, new))
+    return _invoke(["run", str(tmp_path / "s")])
+
+
+def test_actor_off_the_road(tmp_path, town_scenario):
+    from drivefuzz.scenario import Actor
+
+    a = Actor(id="v", kind="vehicle", nav="immobile", start_lane="B0B1_1", start_pos=20, speed=0)
+    _one_line_error(*_edit(tmp_path, town_scenario, "routes.rou.xml", 'value="B0B1_1"', 'value="B0B1_0"', actors=(a,)),
+                    "actors[0](v).start_lane", "does not allow passenger")
+
+
+def test_pedestrian_off_any_walkable_lane(tmp_path, town_scenario):
+    from drivefuzz.scenario import Actor
+
+    a = Actor(id="p", kind="pedestrian", nav="immobile", start_lane="B0B1_0", start_pos=20, speed=0)
+    _one_line_error(*_edit(tmp_path, town_scenario, "routes.rou.xml", 'value="B0B1_0"', 'value="B0B1_1"', actors=(a,)),
+                    "actors[0](p).start_lane", "walkable")
+
+
+def test_negative_puddle_size(tmp_path, town_scenario):
+    from drivefuzz.scenario import Puddle
+
+    p = Puddle(x=1, y=1, length=2, width=2, friction=0.5)
+    _one_line_error(*_edit(tmp_path, town_scenario, "fuzz.add.xml", 'key="drivefuzz.length" value="2.0"',
+                           'key="drivefuzz.length" value="-2.0"', puddles=(p,)), "fuzz.add.xml", "length")
+
+
+def test_mission_with_no_route(tmp_path):
+    from drivefuzz.scenario import Mission, Scenario
+
+    # the highway has no U-turns: nothing leads from the far end back to the on-ramp
+    sc = Scenario(network=str(TOWN.parent / "highway.net.xml"),
+                  mission=Mission(start_lane="hw2_0", start_pos=5, goal_edge="onramp", goal_pos=5))
+    path = tmp_path / "sc.json"
+    path.write_text(sc.model_dump_json())
+    _one_line_error(*_invoke(["run", str(path)]), "sc.json", "mission", "no route")
