@@ -104,7 +104,7 @@ class CollisionOracle(Oracle):
                     if oid not in self._contact:
                         out.append(self._record(frame, "obstacle", oid, 0.0, frame.heading))
         self._contact = touching
-        return out
+        return tuple(out)
 
     def _candidates(self, frame: Frame) -> list[int]:
         """Rows whose body is not separated from the ego's along one of the ego's two axes (grown by

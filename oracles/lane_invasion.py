@@ -428,7 +428,7 @@ class LaneInvasionOracle(Oracle):
         self._episode = True
         _sev, kind, i, lane_id, depth = worst
         return (self.report(frame, kind, (), lane=lane_id, corner=i,
-                            corner_xy=(round(pts[i][0], 3), round(pts[i][1], 3)),
+                            corner_xy=[round(pts[i][0], 3), round(pts[i][1], 3)],
                             depth=None if depth == math.inf else round(depth, 3), ego_lane=frame.lane),)
 
     def _may_change(self, target: _Lane, home_index: int) -> bool:

@@ -80,25 +80,25 @@ class MissionOracle(Oracle):
             out.append(self.report(frame, "stopped_short", (), goal_dist=round(frame.goal_dist, 3), ads_done=True,
                                    stopped_for=round(self._stopped_for(frame.t), 3)))
         if "overshoot" in self._reported:
-            return out
+            return tuple(out)
         if frame.edge == self._goal_edge:
             pos = frame.lane_pos - self._half_len
             if pos != pos:
-                return out
+                return tuple(out)
             if pos <= self._goal_pos + c.overshoot:
                 self._approached = True
             elif self._approached:
                 self._reported.add("overshoot")
                 out.append(self.report(frame, "overshoot", (), goal_dist=round(frame.goal_dist, 3),
                                        beyond=round(pos - self._goal_pos, 3), edge=frame.edge))
-                return out
+                return tuple(out)
             if pos > self._goal_pos:
                 self._passed = True
         elif self._passed:
             self._reported.add("overshoot")
             out.append(self.report(frame, "overshoot", (), goal_dist=round(frame.goal_dist, 3), beyond=None,
                                    edge=frame.edge))
-        return out
+        return tuple(out)
 
     def _stopped_for(self, t: float) -> float:
         return 0.0 if self._stopped_since is None else t - self._stopped_since

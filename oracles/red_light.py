@@ -168,7 +168,7 @@ class RedLightOracle(Oracle):
         elif cand is not None and lane and lane[0] != ":" and lane != cand.lane:
             self._cand = None
             self._links = ()
-        return out
+        return tuple(out)
 
     def _crossing(self, frame: Frame, links: Sequence[LaneLink], edge: str) -> list[Misbehavior]:
         if not links:
