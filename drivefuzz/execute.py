@@ -337,7 +337,7 @@ def _run(sim, scenario: Scenario, rmap, ads: ADS, oracles: list[Oracle], params:
     control = None
     misbehaviors: list[Misbehavior] = []
     termination = Termination.TIME_LIMIT
-    actor_sizes: dict[str, tuple[str, float, float, int]] = {}
+    actor_sizes: dict[str, tuple[float, float, int]] = {}  # length, width, recorder index
     last_edge = ""
     steer = throttle = brake = 0.0
     time_limit = scenario.sim.time_limit
@@ -400,32 +400,21 @@ def _run(sim, scenario: Scenario, rmap, ads: ADS, oracles: list[Oracle], params:
             links = tuple(lst)
         ids, kinds = [], []
         rows = []
-        for vid in vids:
-            if vid == EGO_ID:
-                continue
-            info = actor_sizes.get(vid)
-            if info is None:
-                info = ("vehicle", sim.vehicle.getLength(vid), sim.vehicle.getWidth(vid),
-                        recorder.actor_index(vid, "vehicle", sim.vehicle.getLength(vid), sim.vehicle.getWidth(vid)))
-                actor_sizes[vid] = info
-            px, py = sim.vehicle.getPosition(vid)
-            h = math.radians(90.0 - sim.vehicle.getAngle(vid))
-            hl = info[1] / 2.0
-            rows.append((info[3], px - hl * math.cos(h), py - hl * math.sin(h), h, sim.vehicle.getSpeed(vid), info[1], info[2]))
-            ids.append(vid)
-            kinds.append("vehicle")
-        for pid in pids:
-            info = actor_sizes.get(pid)
-            if info is None:
-                info = ("pedestrian", sim.person.getLength(pid), sim.person.getWidth(pid),
-                        recorder.actor_index(pid, "pedestrian", sim.person.getLength(pid), sim.person.getWidth(pid)))
-                actor_sizes[pid] = info
-            px, py = sim.person.getPosition(pid)
-            h = math.radians(90.0 - sim.person.getAngle(pid))
-            hl = info[1] / 2.0
-            rows.append((info[3], px - hl * math.cos(h), py - hl * math.sin(h), h, sim.person.getSpeed(pid), info[1], info[2]))
-            ids.append(pid)
-            kinds.append("pedestrian")
+        for kind, domain, actor_ids in (("vehicle", sim.vehicle, vids), ("pedestrian", sim.person, pids)):
+            for aid in actor_ids:
+                if aid == EGO_ID:
+                    continue
+                info = actor_sizes.get(aid)
+                if info is None:  # sizes are fixed: read them once per actor
+                    length, width = domain.getLength(aid), domain.getWidth(aid)
+                    info = actor_sizes[aid] = (length, width, recorder.actor_index(aid, kind, length, width))
+                px, py = domain.getPosition(aid)
+                h = math.radians(90.0 - domain.getAngle(aid))
+                hl = info[0] / 2.0
+                rows.append((info[2], px - hl * math.cos(h), py - hl * math.sin(h), h, domain.getSpeed(aid),
+                             info[0], info[1]))
+                ids.append(aid)
+                kinds.append(kind)
         arr = np.asarray(rows, dtype=float).reshape(-1, 7)
         collisions = tuple((c.collider, c.victim, c.type) for c in sim.simulation.getCollisions()
                            if EGO_ID in (c.collider, c.victim))

@@ -15,12 +15,14 @@ from oracles import STOP_STATES
 class ImmobilityOracle(Oracle):
     """Fires when the ego has been stopped without a legitimate reason for longer than ``threshold``.
 
-    The ego is *stopped* while ``frame.speed < stop_speed``. The timer counts
-    consecutive stopped frames that have no legitimate reason; it restarts at
-    zero whenever the ego moves or a legitimate reason applies (so a stop that
-    stays illegitimate after a legitimate wait, e.g. not going on green, is
-    timed from the moment the reason ended). The record is made when the timer
-    exceeds ``threshold`` (once per stop).
+    The ego is *stopped* while ``frame.speed < stop_speed``; a *standstill* is
+    an unbroken run of stopped frames. Within a standstill the oracle adds up
+    the time without a legitimate reason (each frame interval counts when the
+    frame that starts it has none) and fires once that sum exceeds
+    ``threshold`` (once per standstill). Moving ends the standstill and clears
+    the sum. Legitimate intervals pause the clock but do not clear it, so an
+    ego that never goes on green is caught even though each red phase
+    excuses it again.
 
     A stop is legitimate in a frame when one of these holds (checked in order):
 
@@ -51,8 +53,9 @@ class ImmobilityOracle(Oracle):
     it: an ADS should pass it), stopping on green, stopping in the middle of
     the road or at the side of the road away from the goal.
 
-    Kind ``"immobile"``; details: ``stopped_for`` [s] (illegitimately),
-    ``since`` [s] (simulation time the illegitimate stop began), ``lane``.
+    Kind ``"immobile"``; details: ``stopped_for`` [s] (without a legitimate
+    reason), ``standstill`` [s] (in all), ``since`` [s] (simulation time the
+    standstill began), ``lane``.
     """
 
     name = "immobility"
@@ -74,7 +77,10 @@ class ImmobilityOracle(Oracle):
         c = self.config
         self._stop = float(c.stop_speed)
         self._threshold = float(c.threshold)
-        self._since: float | None = None
+        self._since: float | None = None  # start of the current standstill
+        self._illegit = 0.0  # [s] of it without a legitimate reason
+        self._legit = False
+        self._last_t = 0.0
         self._fired = False
         self._half_len = 0.5 * float(ctx.ego_length)
         self._half_wid = 0.5 * float(ctx.ego_width)
@@ -82,24 +88,29 @@ class ImmobilityOracle(Oracle):
         self._lane_len: dict[str, float] = {}
 
     def on_frame(self, frame: Frame) -> Sequence[Misbehavior]:
+        t = frame.t
         if frame.speed >= self._stop:
             self._since = None
             self._fired = False
             return ()
+        if self._since is None:  # a new standstill
+            self._since, self._illegit, self._last_t = t, 0.0, t
+            self._legit = self.legitimate(frame) is not None
+            return ()
+        dt = t - self._last_t
+        self._last_t = t
         if self._fired:
             return ()
-        if self.legitimate(frame) is not None:
-            self._since = None
-            return ()
-        if self._since is None:
-            self._since = frame.t
-            return ()
-        stopped = frame.t - self._since
-        if stopped <= self._threshold:
+        # the time since the previous frame counts if the stop was illegitimate then (re-checked
+        # every frame: the reasons change at a light's switch or when a pedestrian walks off)
+        if not self._legit:
+            self._illegit += dt
+        self._legit = self.legitimate(frame) is not None
+        if self._illegit <= self._threshold:
             return ()
         self._fired = True
-        return (self.report(frame, "immobile", (), stopped_for=round(stopped, 3), since=round(self._since, 3),
-                            lane=frame.lane),)
+        return (self.report(frame, "immobile", (), stopped_for=round(self._illegit, 3),
+                            standstill=round(t - self._since, 3), since=round(self._since, 3), lane=frame.lane),)
 
     # ------------------------------------------------------------------ reasons
     def legitimate(self, frame: Frame) -> str | None:
@@ -127,7 +138,7 @@ class ImmobilityOracle(Oracle):
         vh, vs = frame.actor_heading[veh], frame.actor_speed[veh]
         vl, vw = frame.actor_length[veh], frame.actor_width[veh]
         ch, sh = math.cos(h), math.sin(h)
-        px, py, phl, phw, ph = frame.x, frame.y, self._half_len, self._half_wid, h
+        px, py, phl, ph = frame.x, frame.y, self._half_len, h
         visited: set[int] = set()
         for _ in range(c.max_queue):
             cp, sp = math.cos(ph), math.sin(ph)
@@ -151,7 +162,7 @@ class ImmobilityOracle(Oracle):
                     return "queue"
             if self._blocked_by_pedestrian(lx, ly, lh, lhl, lhw, ax, ay, ped):
                 return "queue"
-            px, py, ph, phl, phw = lx, ly, lh, lhl, lhw
+            px, py, ph, phl = lx, ly, lh, lhl
         return None
 
     def _red_ahead(self, frame: Frame) -> float | None:

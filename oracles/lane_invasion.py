@@ -226,32 +226,38 @@ class LaneInvasionOracle(Oracle):
     and ``ctx.ego_length/width``) are tested against the road map:
 
     - A corner is **fine** when it lies in a junction's drivable area (the
-      junction shape minus its walking areas, grown by ``tolerance``), or
-      within ``tolerance`` of the lateral bounds of an *allowed* lane: a lane
-      of a normal edge that allows passenger cars, does not run against the
-      ego, and is not across a forbidden lane boundary from the ego's lane.
+      junction shape and the junction lanes for cars, minus walking areas,
+      grown by ``tolerance``), or within ``tolerance`` of the lateral bounds of
+      an *allowed* lane: a lane of a normal edge that allows passenger cars,
+      does not run against the ego, and is not across a forbidden lane
+      boundary from the ego's own lane. While any corner is on a junction
+      (entering or leaving it) ``junction_tolerance`` replaces ``tolerance``
+      for the lanes: a turning body sweeps across the lines that start at the
+      junction (the reference ADS's front corner reaches 0.3 m over the centre
+      line leaving the tight corner junctions of the town grid).
     - A lane **runs against the ego** when its edge is the reverse (same nodes,
-      swapped) of the edge the ego drives on (the last edge it was on in its
+      swapped) of the edge the ego drives along (the last edge it was on in its
       own direction and, when that edge is on the route, the next route edge),
       or when its direction differs from the ego's heading by more than 135
       degrees.
     - The ego's **own lane** on an edge is the last lane that held the whole
-      body (within ``tolerance``); until there is one, the lane SUMO puts the
-      ego on. A lane of the same edge is across a **forbidden boundary** when
-      passenger cars may not change from the own lane towards it (SUMO's
-      ``changeLeft``/``changeRight`` lane attributes, read from the net file;
-      absent means allowed). Lane changes across dashed boundaries are legal.
+      body (within ``tolerance``); until there is one and once the body has
+      left the junction, the lane SUMO puts the ego on. A lane of the same edge
+      is across a **forbidden boundary** when passenger cars may not change
+      from the own lane towards it (SUMO's ``changeLeft``/``changeRight`` lane
+      attributes, read from the net file as sumolib does not expose them;
+      absent means allowed). Lane changes across dashed boundaries are legal,
+      whether the route needs them or not.
     - A corner that is not fine is a violation, named by what it lies in
       (strictly, without tolerance), most severe first: an opposite lane
       (``"opposite_lane"``), a sidewalk or walking area (``"sidewalk"``: a lane
       for pedestrians but not cars), a lane behind a forbidden boundary
-      (``"solid_line"``), anything else: outside every lane and junction, or a
-      lane cars may not use (``"off_road"``).
+      (``"solid_line"``), anything else (outside every lane and junction, or on
+      a lane cars may not use: ``"off_road"``).
 
-    Fast path: while the ego is on a normal lane with its whole body within
-    that lane's bounds (and ``tolerance``), the frame costs one projection per
-    corner on the lane's nearest segment. Junction internal lanes (ids starting
-    with ``:``) are not used: the junction polygon covers them.
+    Fast path: while the ego is on a straight normal lane with its whole body
+    within that lane's bounds (and ``tolerance``), the frame costs one exact
+    rectangle-in-strip test (curved lanes: one projection per corner).
 
     One record per episode: after a record the oracle is silent until all
     corners were fine again. Kinds ``"opposite_lane"``, ``"sidewalk"``,
@@ -266,7 +272,7 @@ class LaneInvasionOracle(Oracle):
 
     class Config(Oracle.Config):
         tolerance: float = Field(0.2, ge=0.0, le=1.0, description="[m] a corner may stick out of its lane or junction")
-        junction_tolerance: float = Field(0.5, ge=0.0, le=2.0,
+        junction_tolerance: float = Field(0.5, ge=0.0, le=_REACH,
                                           description="[m] the same while part of the body is on a junction")
 
     def reset(self, ctx: RunContext) -> None:
@@ -289,6 +295,7 @@ class LaneInvasionOracle(Oracle):
     # ------------------------------------------------------------------ frame
     def on_frame(self, frame: Frame) -> Sequence[Misbehavior]:
         lane = self._idx.lanes.get(frame.lane) if frame.lane else None
+        aligned = False
         h = frame.heading
         c, s = math.cos(h), math.sin(h)
         hl, hw = self._hl, self._hw
@@ -301,7 +308,8 @@ class LaneInvasionOracle(Oracle):
                 s0 = frame.lane_pos - hl if frame.lane_pos == frame.lane_pos else 0.0
                 x0, y0, ux, uy, ln, _c, _h = segs[lane.seg_at(s0)]
             cos_d = c * ux + s * uy  # cos / sin of the heading relative to the lane
-            if cos_d > 0.0:
+            aligned = cos_d > 0.0 and lane.edge not in self._against
+            if aligned:
                 if lane.edge != self._ref_edge:
                     self._set_ref(lane.edge)
                 if lane.passenger:
@@ -322,7 +330,7 @@ class LaneInvasionOracle(Oracle):
                             self._home_lane = lane
                         self._episode = False
                         return ()
-        return self._slow(frame, self._corners(x, y, c, s), lane)
+        return self._slow(frame, self._corners(x, y, c, s), lane if aligned else None)
 
     def _corners(self, x: float, y: float, c: float, s: float):
         """Front-right, front-left, rear-left, rear-right."""
@@ -351,7 +359,8 @@ class LaneInvasionOracle(Oracle):
             against |= self._idx.reverse.get(e, frozenset())
         self._against = frozenset(against)
 
-    def _slow(self, frame: Frame, pts, lane) -> Sequence[Misbehavior]:
+    def _slow(self, frame: Frame, pts, lane: _Lane | None) -> Sequence[Misbehavior]:
+        """Corner by corner; ``lane`` is the ego's SUMO lane when it runs the ego's way (else None)."""
         tol = self._tol
         if self._drivable is not None:
             import shapely
@@ -364,7 +373,7 @@ class LaneInvasionOracle(Oracle):
         home = self._home_lane
         if home is not None and lane is not None and lane.edge != home.edge:
             home = None
-        if home is None and lane is not None and not in_junction.any():
+        if home is None and lane is not None and lane.passenger and not in_junction.any():
             # no lane of this edge has held the whole body yet: once the body has left the
             # junction, the lane SUMO puts the ego on is its own (a turn may end straddling)
             home = lane
@@ -374,7 +383,7 @@ class LaneInvasionOracle(Oracle):
         for i, (px, py) in enumerate(pts):
             if in_junction[i]:
                 continue
-            if home is not None and home.passenger and home.edge not in self._against:
+            if home is not None and home.edge not in self._against:
                 d, lh = home.distance(px, py)
                 if d <= 0.5 * home.width + tol_lane and abs(wrap_angle(frame.heading - lh)) <= _OPPOSITE:
                     continue  # in the ego's own lane: fine
@@ -419,7 +428,7 @@ class LaneInvasionOracle(Oracle):
             if worst is None or best_sev > worst[0]:
                 worst = (best_sev, best_kind, i, best_lane, nearest_ok)
         if worst is None:
-            if home is not None and home is not self._home_lane and home.passenger:
+            if home is not None and home is not self._home_lane:
                 self._home_lane = home
             self._episode = False
             return ()

@@ -68,8 +68,9 @@ class RedLightOracle(Oracle):
       yellow, all green), that decides. If they differ, the link actually taken
       decides: the one whose junction lanes (``via`` and its chain) or target
       lane the ego is on in the following frames; if none is identified within
-      ``decide_within`` seconds, the links leading to the next edge of the route
-      decide, else the crossing is reported only if all links were red.
+      ``decide_within`` seconds (or by the end of the run), the links leading
+      to the next edge of the route decide if they agree; otherwise nothing is
+      reported (mixed signals and an unknown link are no certain violation).
     - Red is ``r`` and ``u`` (red-yellow). Yellow (``y``/``Y``) is kind
       ``"yellow"`` and reported only with ``report_yellow``. Pedestrian links
       (to lanes that do not allow cars) are ignored.
@@ -95,11 +96,12 @@ class RedLightOracle(Oracle):
         self._route = tuple(ctx.route)
         self._cand: _StopLine | None = None
         self._links: tuple[LaneLink, ...] = ()
-        self._pending = None  # (snapshot, links, edge, deadline)
+        self._pending = None  # a crossing on mixed signals: (snapshot, links, edge, deadline, lane)
         self._vehicle_lane: dict[str, bool] = {}
         self._chains: dict[str, tuple[str, ...]] = {}
         self._margin = float(self.config.lateral_margin)
         self._cand_lane = ""
+        self._all_vehicle = True
 
     # ------------------------------------------------------------------ helpers
     def _line(self, lane: str) -> _StopLine:
@@ -159,10 +161,12 @@ class RedLightOracle(Oracle):
             out.extend(self._crossing(frame, self._links, cand.edge))
             self._cand = cand = None
             self._links = ()
-        if frame.lane_links:
+        links = frame.lane_links
+        if links:
             if cand is None or cand.lane != lane:
                 self._cand = self._line(lane)
-            self._links = tuple(l for l in frame.lane_links if self._is_vehicle_link(l))
+                self._all_vehicle = all(self._is_vehicle_link(l) for l in links)
+            self._links = links if self._all_vehicle else tuple(l for l in links if self._is_vehicle_link(l))
             if not self._links:
                 self._cand = None
         elif cand is not None and lane and lane[0] != ":" and lane != cand.lane:
@@ -176,7 +180,7 @@ class RedLightOracle(Oracle):
         snap = SimpleNamespace(index=frame.index, t=frame.t, x=frame.x, y=frame.y, speed=frame.speed)
         cats = {_category(l.state) for l in links}
         if len(cats) == 1:
-            return self._verdict(snap, links[0], "all")
+            return self._verdict(snap, self._taken(links, frame.lane) or links[0], "all")
         taken = self._taken(links, frame.lane)
         if taken is not None:
             return self._verdict(snap, taken, "taken")
@@ -202,9 +206,7 @@ class RedLightOracle(Oracle):
             on_route = [l for l in links if self._rmap.lane(l.to_lane).getEdge().getID() == nxt]
             if on_route and len({_category(l.state) for l in on_route}) == 1:
                 return self._verdict(snap, on_route[0], "route")
-        if all(_category(l.state) == "red" for l in links):
-            return self._verdict(snap, links[0], "all")
-        return []
+        return []  # mixed signals and the link taken unknown: not a certain violation
 
     def on_end(self, trace, termination) -> Sequence[Misbehavior]:
         # A crossing whose link was never identified: decide as at the deadline.

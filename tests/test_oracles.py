@@ -24,6 +24,7 @@ from drivefuzz.geometry import rect_distance
 from drivefuzz.oracle import Frame, LaneLink, Misbehavior, Obstacle, RunContext, Termination
 from drivefuzz.roadmap import load_roadmap
 from drivefuzz.scenario import Actor, AdsSpec, Mission, Scenario, SimOptions
+from drivefuzz.ads import Control
 from ego.ads import ReferenceADS
 from oracles.collision import CollisionOracle
 from oracles.immobility import ImmobilityOracle
@@ -96,6 +97,19 @@ class ShortStopADS(ReferenceADS):
     def reset(self, mission, roadmap):
         super().reset(mission, roadmap)
         self.s_goal -= 30.0
+
+
+class NeverGoesADS(ReferenceADS):
+    """Once it has stopped (at the red light), it keeps braking: it does not go on green."""
+
+    def reset(self, mission, roadmap):
+        super().reset(mission, roadmap)
+        self.stuck = False
+
+    def step(self, obs):
+        control = super().step(obs)
+        self.stuck = self.stuck or (obs.t > 1.0 and obs.ego.speed < 0.05)
+        return Control(control.steer, 0.0, 1.0) if self.stuck else control
 
 
 def offset_ads(cls, offset):
@@ -244,28 +258,30 @@ def _red_light_frames(state_right: str, state_straight: str, taken_lane: str):
     b = Frame(index=2, t=0.1, x=134.8, y=106.3, speed=5.0, front=(134.8, 109.6), prev_front=(134.8, 109.3),
               lane="B0B1_1", edge="B0B1", lane_pos=99.2, lane_links=links)  # exactly on the line: no crossing
     c = Frame(index=3, t=0.15, x=134.8, y=106.55, speed=5.0, front=(134.8, 109.85), prev_front=(134.8, 109.6),
-              lane=taken_lane, edge=taken_lane.rsplit("_", 1)[0], lane_pos=0.25)
+              lane=taken_lane, edge=taken_lane.rsplit("_", 1)[0], lane_pos=0.25 if taken_lane else math.nan)
     return a, b, c
 
 
-@pytest.mark.parametrize("right, straight, taken, expected", [
-    ("G", "r", ":B1_11_0", ["red"]),  # mixed: went straight on red
-    ("G", "r", ":B1_9_0", []),  # mixed: turned right on green
-    ("r", "r", ":B1_9_0", ["red"]),  # all red
-    ("y", "y", ":B1_9_0", []),  # yellow: off by default
-    ("s", "s", ":B1_9_0", []),  # right-turn arrow: not red
+@pytest.mark.parametrize("right, straight, taken, route, expected", [
+    ("G", "r", ":B1_11_0", "B1B2", ["red"]),  # mixed: went straight on red
+    ("G", "r", ":B1_9_0", "B1B2", []),  # mixed: turned right on green (off its route)
+    ("G", "r", "", "B1B2", ["red"]),  # mixed, link unknown (off-road): the route's link decides
+    ("G", "r", "", "B1C1", []),
+    ("r", "u", ":B1_9_0", "B1C1", ["red"]),  # all red (red-yellow is still red)
+    ("y", "y", ":B1_9_0", "B1C1", []),  # yellow: off by default
+    ("s", "s", ":B1_9_0", "B1C1", []),  # right-turn arrow: not red
 ])
-def test_red_light_link_taken_decides(right, straight, taken, expected):
+def test_red_light_link_taken_decides(right, straight, taken, route, expected):
     rmap = load_roadmap(NET)
     o = RedLightOracle()
-    o.reset(RunContext(None, rmap, ("B0B1", "B1C1"), (0.0, 0.0), EGO_L, EGO_W, 0.05))
+    o.reset(RunContext(None, rmap, ("B0B1", route), (0.0, 0.0), EGO_L, EGO_W, 0.05))
     out = []
     for f in _red_light_frames(right, straight, taken):
         out.extend(o.on_frame(f))
     out.extend(o.on_end(None, Termination.TIME_LIMIT))
     assert [m.kind for m in out] == expected
     if expected:
-        assert out[0].frame == 3 and out[0].details["decided_by"] in ("all", "taken")
+        assert out[0].frame == 3 and out[0].details["lane"] == "B0B1_1"
 
 
 def test_red_light_yellow_reported_separately_when_asked():
@@ -293,6 +309,20 @@ def test_immobility_red_light_wait_is_legitimate():
     assert ex.misbehaviors == ()
     stopped = ex.trace["speed"] < 0.1
     assert stopped.sum() * 0.05 > 35.0
+    # the same wait, with the red light not counted (the ego stands 1.3 m before the line)
+    ex = run(scenario("B0B1_1", 70.0, "B1C1", 40.0, time_limit=60.0),
+             ImmobilityOracle({"threshold": 30.0, "red_light_distance": 0.5}))
+    assert kinds(ex) == ["immobile"]
+
+
+def test_immobility_not_going_on_green_fires():
+    # red until 45 s (legitimate), then green: the clock runs from 45 s and passes 20 s at 65 s
+    ex = run(scenario("B0B1_1", 70.0, "B1C1", 40.0, time_limit=80.0), ImmobilityOracle({"threshold": 20.0}),
+             ads=NeverGoesADS())
+    (m,) = ex.misbehaviors
+    assert m.kind == "immobile"
+    assert 64.5 < m.time < 66.0
+    assert m.details["standstill"] > 55.0 and m.details["stopped_for"] > 20.0
 
 
 def test_immobility_queue_behind_a_car_waiting_at_red_is_legitimate():
@@ -307,6 +337,10 @@ def test_immobility_queue_behind_a_car_waiting_at_red_is_legitimate():
     stopped = tr["speed"] < 0.1
     assert stopped.sum() * 0.05 > 25.0
     assert np.nanmin(tr["tls_dist"][stopped]) > 5.0  # the ego itself was farther from the line
+    # without the queue rule (no vehicle counts as ahead) the same wait fires
+    ex = run(scenario("B0B1_1", 70.0, "B1C1", 40.0, time_limit=40.0, actors=[leader]),
+             ImmobilityOracle({"threshold": 10.0, "red_light_distance": 5.0, "queue_gap": 0.0}))
+    assert kinds(ex) == ["immobile"]
 
 
 def test_immobility_behind_a_broken_down_car_fires():
