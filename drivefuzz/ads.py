@@ -15,6 +15,7 @@ are built and read every step, on the hot path.
 from __future__ import annotations
 
 import abc
+import importlib
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from typing import Any, ClassVar, Mapping
@@ -156,12 +157,21 @@ def available_ads() -> dict[str, Any]:
 
 
 def load_ads(name: str, options: Mapping[str, Any] | None = None) -> ADS:
+    """The ADS plugin registered as ``name``, or the class at ``name`` = ``package.module:Class``.
+
+    The second form runs an ADS under development without packaging it; the module
+    must be importable (installed, or on PYTHONPATH).
+    """
     eps = available_ads()
-    if name not in eps:
+    if name not in eps and ":" not in name:
         raise InvalidConfig("--ads", None, f"no ADS plugin named {name!r}",
-                            ", ".join(sorted(eps)) or "none installed")
+                            (", ".join(sorted(eps)) or "none installed") + ", or package.module:Class")
     try:
-        cls = eps[name].load()
+        if name in eps:
+            cls = eps[name].load()
+        else:
+            module, _, attr = name.partition(":")
+            cls = getattr(importlib.import_module(module), attr)
     except Exception as exc:  # a broken plugin must not take the tool down with a traceback
         raise PluginError(f"ADS plugin {name!r} failed to load: {type(exc).__name__}: {exc}") from exc
     if not (isinstance(cls, type) and issubclass(cls, ADS)):

@@ -182,12 +182,13 @@ def _progress_printer():
 
     def show(p):
         now = time.monotonic()
-        if not tty and now - last[0] < 10.0:
+        if now - last[0] < (0.2 if tty else 10.0):
             return
         last[0] = now
         best = "-" if p.best_score is None else f"{p.best_score:.1f}"
-        line = (f"execs {p.execs}  {p.rate:.2f}/s  seed {p.seed_index}  cycle {p.cycle}  "
-                f"best score {best}  findings {p.findings}")
+        where = (f"seed {p.seed_index}  cycle {p.cycle}" if p.jobs_running <= 1
+                 else f"jobs {p.jobs_done}/{p.jobs_total} done, {p.jobs_running} running")
+        line = f"execs {p.execs}  {p.rate:.2f}/s  {where}  best score {best}  findings {p.findings}"
         click.echo(("\r" + line + "   ") if tty else line, err=True, nl=not tty)
     return show
 
@@ -209,12 +210,18 @@ def _progress_printer():
 @click.option("--no-feedback", is_flag=True, help="Pick successors at random (the paper's baseline).")
 @click.option("--continue-after-finding", is_flag=True, help="Keep fuzzing a seed after a finding.")
 @click.option("--time-limit", type=float, default=None, help="Simulated seconds per execution (default: the seed's).")
+@click.option("--jobs", "-j", type=int, default=None, help="Seed campaigns at once on a local Dask cluster [1].")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Run the jobs on an existing Dask scheduler (tcp://HOST:PORT or a scheduler.json).")
+@click.option("--exec-timeout", type=float, default=None, help="Wall seconds before an execution is a 'hang' [300].")
+@click.option("--no-isolation", is_flag=True, help="Run executions in this process (no crash isolation; for debugging).")
 @oracle_options
 @handle_errors
 def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_execs, rng_seed, seeds_dir, ads_name,
-         ads_option, no_feedback, continue_after_finding, time_limit, oracle_kv, no_oracle, config_file):
+         ads_option, no_feedback, continue_after_finding, time_limit, jobs, scheduler, exec_timeout, no_isolation,
+         oracle_kv, no_oracle, config_file):
     """Fuzz the ADS on NETWORK (a .net.xml). Exit 0: nothing found; 1: misbehaviour found; 2: bad input."""
-    from drivefuzz.fuzz import Campaign, FuzzConfig, load_campaign, replay_command
+    from drivefuzz.fuzz import Campaign, FuzzConfig, load_campaign
     from drivefuzz.mutate import MutationConfig
     from drivefuzz.quality import QualityConfig
     from drivefuzz.scenario import AdsSpec
@@ -251,11 +258,15 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
                 mutation=MutationConfig.model_validate(config.get("mutation", {})),
                 quality=QualityConfig.model_validate(config.get("quality", {})),
                 time_limit=time_limit or fz.get("time_limit"),
+                isolate=not (no_isolation or fz.get("no_isolation", False)),
+                exec_timeout_s=exec_timeout or fz.get("exec_timeout", 300.0),
             )
         except ValueError as exc:  # pydantic
             raise InvalidConfig(config_file or "options", None, str(exc).splitlines()[0]) from None
         if cfg.cycles < 1 or cfg.population < 1:
             raise InvalidConfig("--cycles/--population", None, "must be at least 1", "a positive integer")
+        if cfg.exec_timeout_s <= 0:
+            raise InvalidConfig("--exec-timeout", str(cfg.exec_timeout_s), "must be positive", "seconds, e.g. 300")
         from drivefuzz.ads import load_ads
 
         load_ads(cfg.ads.name, cfg.ads.options)  # fail now on an unknown ADS or option
@@ -264,32 +275,57 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
         if out_dir.exists() and any(out_dir.iterdir()):
             raise InvalidConfig("-o", str(out_dir), "output directory exists and is not empty",
                                 "a new directory, or --resume to continue it")
+    if jobs is not None and jobs < 1:
+        raise InvalidConfig("--jobs", str(jobs), "must be at least 1", "a positive integer")
     campaign = Campaign(out_dir, seeds, cfg, argv, on_progress=_progress_printer())
+    where = scheduler or ("local" if (jobs or 1) > 1 else None)
+    findings = _run_campaign(campaign, bool(resume_dir), where, jobs or 1)
+    _print_summary(campaign, findings, out_dir)
+    sys.exit(EXIT_FOUND if findings else (EXIT_INTERNAL if campaign.failed_jobs else EXIT_CLEAN))
+
+
+def _run_campaign(campaign, resume: bool, where: str | None, jobs: int):
+    """Run a Campaign here or on Dask, stopping cleanly (everything saved) on the first Ctrl-C."""
+    import contextlib
 
     def _stop(signum, _frame):
         campaign.stop_requested = True
-        click.echo("\nstopping after the current execution (Ctrl-C again to abort)...", err=True)
+        click.echo("\nstopping after the current execution(s) (Ctrl-C again to abort)...", err=True)
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
     old = signal.signal(signal.SIGINT, _stop)
-    click.echo(f"fuzzing {len(seeds)} seed(s) -> {out_dir}", err=True)
+    click.echo(f"fuzzing {len(campaign.seeds)} seed(s) -> {campaign.out}"
+               + (f" on {jobs} local workers" if where == "local" else f" on {where}" if where else ""), err=True)
     try:
-        findings = campaign.run(resume=bool(resume_dir))
+        if where is None:
+            return campaign.run(resume=resume)
+        from drivefuzz.cluster import dask_client
+
+        with dask_client(where, jobs=jobs) as client:
+            return campaign.run(resume=resume, client=client)
     finally:
-        signal.signal(signal.SIGINT, old)
+        with contextlib.suppress(ValueError):
+            signal.signal(signal.SIGINT, old)
+
+
+def _print_summary(campaign, findings, out_dir) -> None:
+    from drivefuzz.fuzz import replay_command
+
     p = campaign.progress
     click.echo("", err=True)
-    click.echo(f"{p.execs} executions in {time.monotonic() - p.started:.0f} s, {len(findings)} finding(s); "
+    click.echo(f"{p.execs} executions ({p.new_execs} in this run, {p.rate:.2f}/s), {len(findings)} finding(s); "
                f"output in {out_dir}")
     if findings:
-        click.echo(f"{'#':>3}  {'oracle/kind':<26} {'time':>7}  {'actors':<12} replay")
+        click.echo(f"{'#':>3}  {'oracle/kind':<30} {'time':>7}  {'actors':<14} replay")
         for i, f in enumerate(findings):
             m = f.misbehavior
-            click.echo(f"{i:>3}  {m.oracle + '/' + m.kind:<26} {m.time:>6.2f}s  {','.join(m.actors) or '-':<12} "
+            when = f"{m.time:>6.2f}s" if m.frame >= 0 else "      -"
+            click.echo(f"{i:>3}  {m.oracle + '/' + m.kind:<30} {when}  {','.join(m.actors) or '-':<14} "
                        f"{replay_command(f.path)}")
-    if campaign.stop_requested:
-        click.echo(f"interrupted; continue with: drivefuzz fuzz --resume {out_dir}", err=True)
-    sys.exit(EXIT_FOUND if findings else EXIT_CLEAN)
+    for si, why in sorted(campaign.failed_jobs.items()):
+        click.echo(f"job for seed {si} failed: {why}; its executions so far are saved, --resume retries it", err=True)
+    if p.jobs_done < p.jobs_total:
+        click.echo(f"stopped; continue with: drivefuzz fuzz --resume {out_dir}", err=True)
 
 
 def _seeds_for(network: str, seeds_dir: str | None):
@@ -327,6 +363,7 @@ def replay(finding, gui):
     """Run a FINDING directory again; 'reproduced' only if the same oracle fires at the same frame."""
     from drivefuzz.execute import execute
     from drivefuzz.oracle import Misbehavior, OracleSettings
+    from drivefuzz.simhost import FAILURE_KINDS
     from drivefuzz.sumofiles import read_scenario
 
     folder = Path(finding)
@@ -336,6 +373,17 @@ def replay(finding, gui):
     verdict = json.loads(vpath.read_text())
     want = Misbehavior.from_dict(verdict["misbehaviors"][0])
     sc = read_scenario(folder)
+    if want.oracle in FAILURE_KINDS:  # a crash, hang or plugin error: run it isolated again
+        from drivefuzz.simhost import SimHost
+
+        with SimHost(timeout_s=verdict.get("exec_timeout_s", 300.0)) as host:
+            out = host.execute(sc, verdict.get("oracles", {}))
+        if out.status == want.oracle and (out.error_type or out.status) == want.kind:
+            click.echo(f"reproduced: {out.status} ({out.detail})")
+            sys.exit(EXIT_CLEAN)
+        got = f"{out.status} ({out.detail})" if out.status != "ok" else "a normal execution"
+        click.echo(f"NOT reproduced: expected {want.oracle}/{want.kind}, got {got}")
+        sys.exit(EXIT_FOUND)
     ex = execute(sc, oracles=OracleSettings(settings=verdict.get("oracles", {})).instantiate(), gui=gui)
     got = ex.misbehaviors[0] if ex.misbehaviors else None
     if got is not None and got.oracle == want.oracle and got.kind == want.kind and got.frame == want.frame:

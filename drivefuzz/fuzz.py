@@ -1,34 +1,30 @@
-"""The feedback-driven fuzz loop (the paper's Algorithm 1) and its output directory.
+"""A fuzz campaign: its output directory, its seed jobs, and the index of every execution.
 
-For each seed: ``cycles`` times, ``generate`` adds one actor or puddle to the
-current scenario, then ``population`` mutants are executed; a mutant that makes
-an oracle fire is a finding (and ends that seed's campaign unless
-``continue_after_finding``); otherwise the mutant with the lowest driving-quality
-score becomes the next scenario (a random one with ``feedback=False``, the
-paper's baseline).
-
-Determinism: every random draw comes from ``Random(f"{seed}/{seed_index}/{cycle}/{member}")``,
-so a campaign is a pure function of its seed and configuration, and resuming
-re-creates exactly the executions that were not finished.
+The campaign process (the client) owns the directory's manifest and its SQLite
+index; the seed jobs (:mod:`drivefuzz.job`, the paper's Algorithm 1 for one seed)
+write everything else themselves. With ``--jobs 1`` the jobs run one after another
+in this process; otherwise they run at once on Dask (:mod:`drivefuzz.cluster`),
+one simulation per worker process. Either way the client follows the jobs'
+journals to keep the index and the progress display current, and stops the jobs
+by creating ``STOP`` when the budget runs out or the user presses Ctrl-C.
 
 Output directory (a person opens it without drivefuzz)::
 
-    manifest.json           version, command line, configuration, seed
-    index.sqlite            one row per execution (written by one process only)
-    journal.jsonl           append-only log of executions (fsync'd): the source of truth for --resume
-    checkpoint.json         where each seed's campaign stands (atomic)
-    corpus/<hash>/          every successor scenario (SUMO files + manifest)
-    findings/<n>-<oracle>-<hash>/   SUMO files, scenario manifest, trace/, verdict.json, replay.sh
+    manifest.json           version, command line, configuration, campaign seed, seed list
+    seeds/NNN/              the seed scenarios (SUMO files + scenario.json)
+    jobs/NNN/               each seed job's journal, checkpoint and summary (see drivefuzz.job)
+    index.sqlite            one row per execution; written only by the client, rebuilt from the
+                            journals on --resume (it is derived data: SQLite must not be shared over NFS)
+    corpus/<hash>/          every successor scenario
+    findings/NNN-KK-<oracle>-<hash>/   SUMO files, scenario.json, trace/, verdict.json, replay.sh
 """
 
 from __future__ import annotations
 
 import json
 import os
-import random
 import shlex
 import sqlite3
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -36,24 +32,32 @@ from typing import Any, Callable, Sequence
 
 import drivefuzz
 from drivefuzz.errors import InvalidConfig
-from drivefuzz.execute import Execution, execute
-from drivefuzz.mutate import MutationConfig, Mutator
+from drivefuzz.job import STOP_FILE, SeedJob, job_dir, run_seed_job
+from drivefuzz.mutate import MutationConfig
 from drivefuzz.oracle import Misbehavior, OracleSettings
-from drivefuzz.quality import QualityConfig, score_trace
-from drivefuzz.roadmap import load_roadmap
+from drivefuzz.quality import QualityConfig
 from drivefuzz.scenario import AdsSpec, Scenario
-from drivefuzz.storage import atomic_dir, atomic_write_json, atomic_write_text
+from drivefuzz.storage import atomic_write_json
 from drivefuzz.sumofiles import load_scenario, write_scenario
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS executions (
     exec_id INTEGER PRIMARY KEY,
+    key TEXT UNIQUE,
     seed_index INTEGER, cycle INTEGER, member INTEGER,
     scenario_hash TEXT, parent_hash TEXT, mutation TEXT, retries INTEGER,
     score REAL, components TEXT, verdict TEXT, termination TEXT, finding TEXT,
-    frames INTEGER, wall_time REAL
+    frames INTEGER, wall_time REAL, timings TEXT, pid INTEGER
 );
 """
+#: (column, journal record key) of the index's rows
+COLUMNS = (("key", "key"), ("seed_index", "seed_index"), ("cycle", "cycle"), ("member", "member"),
+           ("scenario_hash", "hash"), ("parent_hash", "parent"), ("mutation", "mutation"), ("retries", "retries"),
+           ("score", "score"), ("components", "components"), ("verdict", "verdict"), ("termination", "termination"),
+           ("finding", "finding"), ("frames", "frames"), ("wall_time", "wall_time"), ("timings", "timings"),
+           ("pid", "pid"))
+_INSERT = (f"INSERT OR IGNORE INTO executions ({', '.join(c for c, _ in COLUMNS)}) "
+           f"VALUES ({', '.join('?' * len(COLUMNS))})")
 
 
 @dataclass
@@ -71,6 +75,8 @@ class FuzzConfig:
     mutation: MutationConfig = field(default_factory=MutationConfig)
     quality: QualityConfig = field(default_factory=QualityConfig)
     time_limit: float | None = None  # override the seeds' simulated time limit [s]
+    isolate: bool = True  # run executions in a simulation-host child (crash isolation)
+    exec_timeout_s: float = 300.0  # [s] wall clock; longer is a 'hang' finding
 
     def to_json(self) -> dict[str, Any]:
         return {
@@ -79,6 +85,7 @@ class FuzzConfig:
             "continue_after_finding": self.continue_after_finding, "ads": self.ads.model_dump(mode="json"),
             "oracles": self.oracles.settings, "mutation": self.mutation.model_dump(mode="json"),
             "quality": self.quality.model_dump(mode="json"), "time_limit": self.time_limit,
+            "isolate": self.isolate, "exec_timeout_s": self.exec_timeout_s,
         }
 
     @classmethod
@@ -90,6 +97,7 @@ class FuzzConfig:
             ads=AdsSpec.model_validate(d.get("ads", {})), oracles=OracleSettings(settings=d.get("oracles", {})),
             mutation=MutationConfig.model_validate(d.get("mutation", {})),
             quality=QualityConfig.model_validate(d.get("quality", {})), time_limit=d.get("time_limit"),
+            isolate=d.get("isolate", True), exec_timeout_s=d.get("exec_timeout_s", 300.0),
         )
 
 
@@ -99,29 +107,39 @@ class Finding:
     misbehavior: Misbehavior
     scenario_hash: str
     seed_index: int
-    exec_id: int
+    key: str
 
 
 @dataclass
 class Progress:
-    execs: int = 0
+    execs: int = 0  # every execution of the campaign, including those before a resume
+    new_execs: int = 0  # executions of this run (the rate's numerator)
     findings: int = 0
     seed_index: int = 0
     cycle: int = 0
     best_score: float | None = None
+    jobs_total: int = 0
+    jobs_done: int = 0
+    jobs_running: int = 0
     started: float = field(default_factory=time.monotonic)
 
     @property
     def rate(self) -> float:
-        return self.execs / max(time.monotonic() - self.started, 1e-9)
+        return self.new_execs / max(time.monotonic() - self.started, 1e-9)
 
 
 def replay_command(finding_dir: Path) -> str:
     return f"drivefuzz replay {shlex.quote(str(finding_dir))}"
 
 
+def load_finding(path: Path) -> Finding:
+    v = json.loads((path / "verdict.json").read_text())
+    return Finding(path, Misbehavior.from_dict(v["misbehaviors"][0]), v["scenario_hash"], v.get("seed_index", 0),
+                   v.get("key", ""))
+
+
 class Campaign:
-    """One output directory; runs (or resumes) the loop over a list of seed scenarios."""
+    """One output directory; runs (or resumes) a job per seed, here or on a Dask client."""
 
     def __init__(self, out: str | os.PathLike, seeds: Sequence[Scenario], config: FuzzConfig,
                  argv: Sequence[str] = (), on_progress: Callable[[Progress], None] | None = None):
@@ -130,178 +148,151 @@ class Campaign:
         self.cfg = config
         self.argv = list(argv)
         self.on_progress = on_progress or (lambda p: None)
-        self.progress = Progress()
+        self.progress = Progress(jobs_total=len(self.seeds))
         self.findings: list[Finding] = []
+        self.failed_jobs: dict[int, str] = {}  # seed index -> why its job failed (Dask gave up on it)
         self.stop_requested = False
+        self._offsets: dict[int, int] = {}
+        self._deadline: float | None = None
 
     # ------------------------------------------------------------- directory
-    def _init_dir(self, resume: bool) -> dict[str, Any]:
+    def prepare(self, resume: bool) -> list[int]:
+        """Create (or reopen) the directory and rebuild the index; return the seed indices still to run."""
         self.out.mkdir(parents=True, exist_ok=True)
-        (self.out / "corpus").mkdir(exist_ok=True)
-        (self.out / "findings").mkdir(exist_ok=True)
-        seeds_dir = self.out / "seeds"
-        if not resume:
+        for sub in ("corpus", "findings", "jobs"):
+            (self.out / sub).mkdir(exist_ok=True)
+        if not resume or not (self.out / "manifest.json").exists():
             for i, sc in enumerate(self.seeds):
-                write_scenario(sc, seeds_dir / f"{i:03d}")
+                write_scenario(sc, self.out / "seeds" / f"{i:03d}")
             atomic_write_json(self.out / "manifest.json", {
                 "drivefuzz": drivefuzz.__version__, "command": self.argv, "config": self.cfg.to_json(),
                 "seed": self.cfg.seed, "seeds": [f"seeds/{i:03d}" for i in range(len(self.seeds))],
                 "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
             })
+        else:  # budgets may be given anew on resume; the rest of the configuration is the campaign's
+            manifest = json.loads((self.out / "manifest.json").read_text())
+            manifest["config"].update(budget_s=self.cfg.budget_s, max_execs=self.cfg.max_execs)
+            atomic_write_json(self.out / "manifest.json", manifest)
+        (self.out / STOP_FILE).unlink(missing_ok=True)
         self.db = sqlite3.connect(self.out / "index.sqlite")
-        self.db.executescript(SCHEMA)
-        ckpt_path = self.out / "checkpoint.json"
-        ckpt = json.loads(ckpt_path.read_text()) if resume and ckpt_path.exists() else {}
-        self.journal_path = self.out / "journal.jsonl"
-        self.done: dict[str, dict[str, Any]] = {}
-        if resume and self.journal_path.exists():
-            for line in self.journal_path.read_text().splitlines():
+        self.db.executescript("DROP TABLE IF EXISTS executions;" + SCHEMA)  # derived data: rebuilt from journals
+        self._offsets = {}
+        self.findings, self.progress.execs, self.progress.findings = [], 0, 0
+        self.poll()
+        self.progress.new_execs = 0
+        self.progress.started = time.monotonic()
+        pending = [i for i in range(len(self.seeds)) if not (job_dir(self.out, i) / "summary.json").exists()]
+        self.progress.jobs_done = len(self.seeds) - len(pending)
+        return pending
+
+    def poll(self) -> int:
+        """Index the executions the jobs have journalled since the last poll; return how many."""
+        new = 0
+        for si in range(len(self.seeds)):
+            path = job_dir(self.out, si) / "journal.jsonl"
+            if not path.exists():
+                continue
+            offset = self._offsets.get(si, 0)
+            with open(path, "rb") as fh:
+                fh.seek(offset)
+                data = fh.read()
+            end = data.rfind(b"\n") + 1  # a line being written is read at the next poll
+            self._offsets[si] = offset + end
+            for line in data[:end].splitlines():
                 try:
                     rec = json.loads(line)
-                except json.JSONDecodeError:  # a torn last line from a kill
+                except json.JSONDecodeError:  # torn by a kill, then appended after
                     continue
-                self.done[rec["key"]] = rec
-        self.progress.execs = len(self.done)
-        for d in sorted((self.out / "findings").glob("*/verdict.json")):
-            v = json.loads(d.read_text())
-            self.findings.append(Finding(d.parent, Misbehavior.from_dict(v["misbehaviors"][0]), v["scenario_hash"],
-                                         v.get("seed_index", 0), v.get("exec_id", 0)))
-        self.progress.findings = len(self.findings)
-        return ckpt
-
-    def _journal(self, rec: dict[str, Any]) -> None:
-        with open(self.journal_path, "a") as fh:
-            fh.write(json.dumps(rec, sort_keys=True) + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
+                if rec.get("event") == "end":
+                    self._index(rec)
+                    new += 1
+        if new:
+            self.db.commit()
+            self.progress.new_execs += new
+            self.on_progress(self.progress)
+        return new
 
     def _index(self, rec: dict[str, Any]) -> None:
-        self.db.execute(
-            "INSERT OR REPLACE INTO executions VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
-            (rec["exec_id"], rec["seed_index"], rec["cycle"], rec["member"], rec["hash"], rec["parent"],
-             rec["mutation"], rec["retries"], rec["score"], json.dumps(rec["components"]), rec["verdict"],
-             rec["termination"], rec["finding"], rec["frames"], rec["wall_time"]))
-        self.db.commit()
+        row = [json.dumps(rec.get(k, {})) if k in ("components", "timings") else rec.get(k) for _, k in COLUMNS]
+        cur = self.db.execute(_INSERT, row)
+        if cur.rowcount == 0:  # the same execution journalled twice (a job re-run after a kill)
+            return
+        p = self.progress
+        p.execs += 1
+        p.seed_index, p.cycle = rec["seed_index"], rec["cycle"]
+        if rec.get("score") is not None and (p.best_score is None or rec["score"] < p.best_score):
+            p.best_score = rec["score"]
+        if rec.get("finding"):
+            path = self.out / rec["finding"]
+            if path.is_dir() and all(f.path != path for f in self.findings):
+                self.findings.append(load_finding(path))
+                p.findings = len(self.findings)
 
-    def _save_finding(self, ex: Execution, seed_index: int, exec_id: int) -> Finding:
-        m = ex.misbehaviors[0]
-        h = ex.scenario.content_hash()
-        existing = next((f for f in self.findings if f.scenario_hash == h), None)
-        if existing is not None:  # resumed: the same execution was already saved
-            return existing
-        path = self.out / "findings" / f"{len(self.findings):04d}-{m.oracle}-{h}"
-        with atomic_dir(path) as tmp:
-            write_scenario(ex.scenario, tmp)
-            ex.trace.save(tmp / "trace")
-            atomic_write_json(tmp / "verdict.json", {
-                "misbehaviors": [x.as_dict() for x in ex.misbehaviors], "termination": ex.termination.value,
-                "scenario_hash": h, "seed_index": seed_index, "exec_id": exec_id, "frames": ex.trace.n_frames,
-                "oracles": self.cfg.oracles.settings, "drivefuzz": drivefuzz.__version__,
-            })
-            atomic_write_text(tmp / "replay.sh", "#!/bin/sh\n# Runs this finding again and checks it reproduces.\n"
-                              'cd "$(dirname "$0")" && exec drivefuzz replay .\n')
-            os.chmod(tmp / "replay.sh", 0o755)
-        f = Finding(path, m, h, seed_index, exec_id)
-        self.findings.append(f)
-        self.progress.findings = len(self.findings)
-        return f
-
-    # ------------------------------------------------------------------ loop
-    def run(self, resume: bool = False) -> list[Finding]:
-        ckpt = self._init_dir(resume)
-        cfg = self.cfg
-        deadline = None if cfg.budget_s is None else time.monotonic() + cfg.budget_s
-        start_seed = ckpt.get("seed_index", 0)
-        exec_id = max((r["exec_id"] for r in self.done.values()), default=-1) + 1
-        quality = cfg.quality
-        for si in range(start_seed, len(self.seeds)):
-            seed_sc = self.seeds[si]
-            if cfg.time_limit:
-                seed_sc = seed_sc.model_copy(update={"sim": seed_sc.sim.model_copy(update={"time_limit": cfg.time_limit})})
-            seed_sc = seed_sc.model_copy(update={"ads": cfg.ads})
-            rmap = load_roadmap(seed_sc.network_path())
-            mutator = Mutator(rmap, cfg.mutation)
-            current = seed_sc
-            first_cycle = 0
-            if ckpt.get("seed_index") == si and ckpt.get("current"):
-                current = load_scenario(self.out / ckpt["current"]).model_copy(update={"ads": cfg.ads})
-                first_cycle = ckpt.get("cycle", 0)
-            self.progress.seed_index = si
-            ended = False
-            for cycle in range(first_cycle, cfg.cycles):
-                self.progress.cycle = cycle
-                rng = random.Random(f"{cfg.seed}/{si}/{cycle}/generate")
-                gen = mutator.generate(current, cfg.strategy, rng)
-                parent = gen.scenario
-                population: list[tuple[float, Scenario]] = []
-                for member in range(cfg.population):
-                    if self._out_of_budget(deadline):
-                        self._checkpoint(si, cycle, current)
-                        return self.findings
-                    key = f"{si}/{cycle}/{member}"
-                    mrng = random.Random(f"{cfg.seed}/{si}/{cycle}/{member}")
-                    mut = mutator.mutate(parent, mrng)
-                    child = mut.scenario
-                    if key in self.done:  # finished before a kill: reuse its result
-                        rec = self.done[key]
-                        if rec["score"] is not None:
-                            population.append((rec["score"], child))
-                        if rec["finding"] and not cfg.continue_after_finding:
-                            ended = True
-                            break
-                        continue
-                    description = f"{gen.description} | {mut.description}"
-                    ex = execute(child, oracles=cfg.oracles.instantiate())
-                    rec = {"key": key, "exec_id": exec_id, "seed_index": si, "cycle": cycle, "member": member,
-                           "hash": child.content_hash(), "parent": current.content_hash(), "mutation": description,
-                           "retries": gen.retries + mut.retries, "termination": ex.termination.value,
-                           "frames": ex.trace.n_frames, "wall_time": round(ex.wall_time, 4), "finding": None,
-                           "score": None, "components": {}, "verdict": "pass"}
-                    if ex.misbehaviors:
-                        finding = self._save_finding(ex, si, exec_id)
-                        m = ex.misbehaviors[0]
-                        rec.update(verdict=f"{m.oracle}/{m.kind}", finding=str(finding.path.relative_to(self.out)))
-                    else:
-                        q = score_trace(ex.trace, quality)
-                        rec.update(score=q.score, components=q.as_dict())
-                        population.append((q.score, child))
-                        if self.progress.best_score is None or q.score < self.progress.best_score:
-                            self.progress.best_score = q.score
-                    self._journal(rec)
-                    self._index(rec)
-                    self.done[key] = rec
-                    exec_id += 1
-                    self.progress.execs += 1
-                    self.on_progress(self.progress)
-                    if rec["finding"] and not cfg.continue_after_finding:
-                        ended = True
-                        break
-                if ended:
-                    break
-                if population:
-                    if cfg.feedback:
-                        current = min(population, key=lambda p: p[0])[1]
-                    else:
-                        current = random.Random(f"{cfg.seed}/{si}/{cycle}/select").choice(population)[1]
-                    write_scenario(current, self.out / "corpus" / current.content_hash())
-                self._checkpoint(si, cycle + 1, current)
-            self._checkpoint(si + 1, 0, None)
-        return self.findings
-
-    def _out_of_budget(self, deadline: float | None) -> bool:
+    # ------------------------------------------------------------------ budget
+    def out_of_budget(self) -> bool:
         if self.stop_requested:
             return True
-        if deadline is not None and time.monotonic() >= deadline:
+        if self._deadline is not None and time.monotonic() >= self._deadline:
             return True
         return self.cfg.max_execs is not None and self.progress.execs >= self.cfg.max_execs
 
-    def _checkpoint(self, si: int, cycle: int, current: Scenario | None) -> None:
-        ref = None
-        if current is not None:
-            ref = f"corpus/{current.content_hash()}"
-            if not (self.out / ref / "scenario.json").exists():
-                write_scenario(current, self.out / ref)
-        atomic_write_json(self.out / "checkpoint.json", {"seed_index": si, "cycle": cycle, "current": ref})
+    def _request_stop(self) -> None:
+        (self.out / STOP_FILE).touch()
+
+    # --------------------------------------------------------------------- run
+    def run(self, resume: bool = False, client=None) -> list[Finding]:
+        """Run every unfinished seed job; with a Dask ``client`` at once on its workers."""
+        pending = self.prepare(resume)
+        self._deadline = None if self.cfg.budget_s is None else time.monotonic() + self.cfg.budget_s
+        if client is None:
+            self._run_here(pending)
+        else:
+            self._run_on(client, pending)
+        self.poll()
+        self.findings.sort(key=lambda f: f.path.name)
+        return self.findings
+
+    def _run_here(self, pending: list[int]) -> None:
+        for si in pending:
+            if self.out_of_budget():
+                break
+            self.progress.jobs_running = 1
+            summary = SeedJob(self.out, si).run(stop=self.out_of_budget, on_record=lambda rec: self.poll())
+            self.progress.jobs_running = 0
+            if summary["status"] == "done":
+                self.progress.jobs_done += 1
+
+    def _run_on(self, client, pending: list[int]) -> None:
+        from distributed import wait
+
+        tag = f"{self.out.resolve().name}-{os.getpid()}"
+        futures = {client.submit(run_seed_job, str(self.out.resolve()), si, key=f"drivefuzz-{tag}-seed{si:03d}",
+                                 pure=False, retries=1): si for si in pending}
+        stop_sent = False
+        try:
+            while futures:
+                try:
+                    wait(list(futures), timeout=0.5, return_when="FIRST_COMPLETED")
+                except TimeoutError:
+                    pass
+                self.poll()
+                if not stop_sent and self.out_of_budget():
+                    self._request_stop()
+                    stop_sent = True
+                for fut in [f for f in futures if f.done()]:
+                    si = futures.pop(fut)
+                    try:
+                        summary = fut.result()
+                    except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: report, keep the rest going
+                        self.failed_jobs[si] = f"{type(exc).__name__}: {exc}"
+                        continue
+                    if summary["status"] == "done":
+                        self.progress.jobs_done += 1
+                self.progress.jobs_running = sum(1 for f in futures if f.status == "pending")
+                self.on_progress(self.progress)
+        except BaseException:  # Ctrl-C twice, or the client lost the scheduler: stop the jobs, keep their work
+            self._request_stop()
+            raise
 
 
 def load_campaign(out: str | os.PathLike) -> tuple[list[Scenario], FuzzConfig, list[str]]:
@@ -311,6 +302,11 @@ def load_campaign(out: str | os.PathLike) -> tuple[list[Scenario], FuzzConfig, l
     if not path.is_file():
         raise InvalidConfig(str(out), None, "not a drivefuzz output directory (no manifest.json)",
                             "a directory written by 'drivefuzz fuzz -o'")
-    manifest = json.loads(path.read_text())
-    seeds = [load_scenario(out / s) for s in manifest["seeds"]]
-    return seeds, FuzzConfig.from_json(manifest["config"]), manifest.get("command", [])
+    try:
+        manifest = json.loads(path.read_text())
+        seeds = [load_scenario(out / s) for s in manifest["seeds"]]
+        cfg = FuzzConfig.from_json(manifest["config"])
+    except (KeyError, ValueError) as exc:
+        raise InvalidConfig(str(path), None, f"unreadable campaign manifest ({type(exc).__name__}: {exc})",
+                            "a manifest.json written by 'drivefuzz fuzz'") from None
+    return seeds, cfg, manifest.get("command", [])

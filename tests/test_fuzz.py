@@ -12,6 +12,13 @@ from drivefuzz.fuzz import Campaign, FuzzConfig
 from drivefuzz.scenario import AdsSpec, SimOptions
 
 
+def _ended(out, records=False):
+    """The finished executions of seed job 0, in journal order."""
+    recs = [json.loads(line) for line in (out / "jobs" / "000" / "journal.jsonl").read_text().splitlines()]
+    recs = [r for r in recs if r["event"] == "end"]
+    return recs if records else [r["key"] for r in recs]
+
+
 def test_faulty_ads_is_found_and_the_finding_replays(tmp_path, town_scenario):
     seed = town_scenario.model_copy(update={"sim": SimOptions(time_limit=40.0)})
     cfg = FuzzConfig(cycles=2, population=2, max_execs=4, ads=AdsSpec(name="ego", options={"fault": "speeding"}))
@@ -32,21 +39,21 @@ def test_resume_continues_without_losing_or_repeating(tmp_path, town_scenario):
     out = tmp_path / "out"
     cfg0 = dict(cycles=3, population=2, seed=5, continue_after_finding=True)
     first = Campaign(out, [seed], FuzzConfig(max_execs=3, **cfg0)).run()
-    keys_first = [json.loads(l)["key"] for l in (out / "journal.jsonl").read_text().splitlines()]
+    keys_first = _ended(out)
     assert len(keys_first) == 3
     from drivefuzz.fuzz import load_campaign
 
     seeds, cfg, _ = load_campaign(out)
     cfg.max_execs = 6
     Campaign(out, seeds, cfg).run(resume=True)
-    keys = [json.loads(l)["key"] for l in (out / "journal.jsonl").read_text().splitlines()]
+    keys = _ended(out)
     assert keys[:3] == keys_first and len(keys) == len(set(keys)) == 6
     # the same campaign in one go gives the same executions
     findings = sorted(p.name for p in (out / "findings").iterdir())
     assert len(findings) == len({n.rsplit("-", 1)[1] for n in findings})  # no finding saved twice
     assert set(f.path.name for f in first) <= set(findings)  # none lost
     Campaign(tmp_path / "again", [seed], FuzzConfig(max_execs=6, **cfg0)).run()
-    again = [json.loads(l) for l in (tmp_path / "again" / "journal.jsonl").read_text().splitlines()]
-    resumed = [json.loads(l) for l in (out / "journal.jsonl").read_text().splitlines()]
+    again = _ended(tmp_path / "again", records=True)
+    resumed = _ended(out, records=True)
     assert [r["hash"] for r in again] == [r["hash"] for r in resumed]
     assert [r["score"] for r in again] == [r["score"] for r in resumed]

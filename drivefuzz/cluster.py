@@ -1,0 +1,114 @@
+"""Where seed jobs run: a Dask client on a local cluster, an existing scheduler, or a batch system.
+
+- ``local``: a ``LocalCluster`` that drivefuzz starts and stops, one single-threaded
+  worker process per job (libsumo allows one simulation per process);
+- an address (``tcp://host:8786``) or a scheduler file (``scheduler.json``) of a
+  running ``dask scheduler`` whose workers were started with ``dask worker --nthreads 1``;
+- ``slurm``, ``pbs``, ``sge``, ``lsf``: dask-jobqueue starts the workers as batch jobs.
+
+Settings measured for long, uneven jobs (``../shared/reference/distributed-notes.md``):
+``worker-saturation: 1.0`` gives each worker one job and keeps the rest queued on
+the scheduler. Workers need no ``daemon: False``: the simulation host is a plain
+subprocess. Every worker must reach the campaign directory (a shared filesystem).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+from typing import Any, Iterator
+
+from pydantic import BaseModel, ConfigDict, Field
+
+from drivefuzz.errors import InvalidConfig
+
+BATCH_SYSTEMS = ("slurm", "pbs", "sge", "lsf")
+
+DASK_SETTINGS = {
+    "distributed.scheduler.worker-saturation": 1.0,  # one job per worker; the rest wait on the scheduler
+    "distributed.scheduler.allowed-failures": 3,  # a job may take down 3 workers before Dask gives up on it
+}
+
+
+class BatchSpec(BaseModel):
+    """Worker jobs on a batch system (``[cluster]`` of a campaign file)."""
+
+    model_config = ConfigDict(extra="forbid")
+    backend: str = Field(default="slurm", description="slurm, pbs, sge or lsf")
+    queue: str | None = None
+    account: str | None = None
+    cores: int = Field(default=16, ge=1, description="cores per batch job = worker processes per job")
+    memory: str = Field(default="32GB", description="memory per batch job")
+    walltime: str = Field(default="04:00:00")
+    max_jobs: int = Field(default=4, ge=1, description="batch jobs at most (adaptive)")
+    prologue: list[str] = Field(default_factory=list, description="shell lines before the worker starts, e.g. activating a venv")
+    local_directory: str | None = None
+    log_directory: str | None = None
+
+
+def make_batch_cluster(spec: BatchSpec):
+    """A dask-jobqueue cluster whose every worker is a single-threaded process (``cores == processes``)."""
+    import dask_jobqueue
+
+    classes = {"slurm": dask_jobqueue.SLURMCluster, "pbs": dask_jobqueue.PBSCluster,
+               "sge": dask_jobqueue.SGECluster, "lsf": dask_jobqueue.LSFCluster}
+    if spec.backend not in classes:
+        raise InvalidConfig("cluster.backend", spec.backend, "unknown batch system", ", ".join(BATCH_SYSTEMS))
+    kwargs: dict[str, Any] = dict(cores=spec.cores, processes=spec.cores, memory=spec.memory, walltime=spec.walltime,
+                                  queue=spec.queue, job_script_prologue=list(spec.prologue))
+    if spec.account:
+        kwargs["account" if spec.backend != "lsf" else "project"] = spec.account
+    if spec.local_directory:
+        kwargs["local_directory"] = spec.local_directory
+    if spec.log_directory:
+        kwargs["log_directory"] = spec.log_directory
+    # retire workers before the walltime kills them; adapt() starts new ones and the jobs resume there
+    kwargs["worker_extra_args"] = ["--lifetime", _lifetime(spec.walltime), "--lifetime-stagger", "2m"]
+    return classes[spec.backend](**kwargs)
+
+
+def _lifetime(walltime: str) -> str:
+    """Retire a worker 10 minutes before its batch job's walltime (its job resumes elsewhere)."""
+    parts = [int(p) for p in walltime.split(":")]
+    while len(parts) < 3:
+        parts.insert(0, 0)
+    seconds = parts[0] * 3600 + parts[1] * 60 + parts[2]
+    return f"{max(seconds - 600, 60)}s"
+
+
+@contextlib.contextmanager
+def dask_client(where: str = "local", jobs: int = 2, batch: BatchSpec | None = None) -> Iterator[Any]:
+    """A Dask client for ``where``: ``local``, an address or scheduler file, or a batch system."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    with dask.config.set(DASK_SETTINGS), contextlib.ExitStack() as stack:
+        if where == "local":
+            cluster = stack.enter_context(LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
+                                                       dashboard_address=None, silence_logs=40))
+            client = stack.enter_context(Client(cluster))
+        elif where in BATCH_SYSTEMS:
+            spec = (batch or BatchSpec()).model_copy(update={"backend": where})
+            cluster = stack.enter_context(make_batch_cluster(spec))
+            cluster.adapt(minimum_jobs=1, maximum_jobs=spec.max_jobs)
+            client = stack.enter_context(Client(cluster))
+        else:
+            client = stack.enter_context(_connect(where))
+        yield client
+
+
+def _connect(where: str):
+    from distributed import Client
+
+    try:
+        if where.endswith(".json") or Path(where).is_file():
+            if not Path(where).is_file():
+                raise InvalidConfig("--scheduler", where, "no such scheduler file", "tcp://HOST:PORT or a scheduler.json")
+            return Client(scheduler_file=where, timeout="20s")
+        if "://" not in where and ":" not in where:
+            raise InvalidConfig("--scheduler", where, "not a scheduler address",
+                                "local, tcp://HOST:PORT, a scheduler.json, or " + "/".join(BATCH_SYSTEMS))
+        return Client(where, timeout="20s")
+    except (OSError, TimeoutError) as exc:
+        raise InvalidConfig("--scheduler", where, f"cannot reach the Dask scheduler ({type(exc).__name__})",
+                            "the address a running 'dask scheduler' printed") from None

@@ -1,0 +1,213 @@
+"""Crash isolation: executions run in a persistent child process, the simulation host.
+
+libsumo runs SUMO inside the Python process, so a segfault or abort in SUMO (or in
+native code an ADS plugin loads) would kill whoever called it: a campaign, or a
+Dask worker. The fuzz loop therefore sends each execution to a child process
+and turns whatever goes wrong there into an :class:`Outcome`:
+
+- ``ok``: the child returned the :class:`~drivefuzz.execute.Execution`;
+- ``simulator-crash``: the child died (a signal such as SIGSEGV/SIGABRT, or an exit);
+- ``hang``: no answer within the wall-clock limit (the child is killed);
+- ``plugin-error``: an ADS or oracle plugin raised (:class:`~drivefuzz.errors.PluginError`);
+- ``internal-error``: any other exception in the child (a SUMO error, or a drivefuzz bug).
+
+The parent restarts a dead child before the next execution (about 0.4 s), so a
+campaign goes on. The child is started with :mod:`subprocess`, not
+:mod:`multiprocessing`, so it works inside daemonic Dask worker processes without
+``distributed.worker.daemon: False``. It ignores SIGINT (the parent decides when a
+campaign stops) and exits on its own when its parent dies, even mid-execution.
+
+Protocol on the child's stdin/stdout: 8-byte big-endian length + pickle, both ways.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import select
+import signal
+import struct
+import subprocess
+import sys
+import threading
+import time
+import traceback
+from dataclasses import dataclass
+from typing import Any, BinaryIO
+
+from drivefuzz.errors import PluginError, SimulationError
+
+OK, CRASH, HANG, PLUGIN_ERROR, INTERNAL_ERROR = "ok", "simulator-crash", "hang", "plugin-error", "internal-error"
+#: Finding kinds that are not oracle verdicts but failures of the system under test or of SUMO.
+FAILURE_KINDS = (CRASH, HANG, PLUGIN_ERROR, INTERNAL_ERROR)
+
+_HEADER = struct.Struct(">Q")
+
+
+@dataclass
+class Outcome:
+    status: str  # one of OK, CRASH, HANG, PLUGIN_ERROR, INTERNAL_ERROR
+    execution: Any = None  # drivefuzz.execute.Execution when status == OK
+    detail: str = ""  # one line: the signal, the exception, the limit
+    error_type: str = ""  # exception class name, or signal name
+    traceback: str = ""
+    wall_time: float = 0.0  # [s] as seen by the parent
+
+
+def _send(fh: BinaryIO, obj: Any) -> None:
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    fh.write(_HEADER.pack(len(data)) + data)
+    fh.flush()
+
+
+def _read_exact(fd: int, n: int, deadline: float | None) -> bytes | None:
+    """Read n bytes from fd; None on EOF; raises TimeoutError past the deadline."""
+    chunks, got = [], 0
+    while got < n:
+        if deadline is not None:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise TimeoutError
+            ready, _, _ = select.select([fd], [], [], left)
+            if not ready:
+                raise TimeoutError
+        chunk = os.read(fd, min(n - got, 1 << 20))
+        if not chunk:
+            return None
+        chunks.append(chunk)
+        got += len(chunk)
+    return b"".join(chunks)
+
+
+def _signal_name(returncode: int) -> str:
+    if returncode < 0:
+        try:
+            return signal.Signals(-returncode).name
+        except ValueError:
+            return f"signal {-returncode}"
+    return f"exit status {returncode}"
+
+
+class SimHost:
+    """A persistent child process that runs executions; use as a context manager."""
+
+    def __init__(self, timeout_s: float | None = 300.0):
+        self.timeout_s = timeout_s
+        self.proc: subprocess.Popen | None = None
+        self.starts = 0
+
+    def __enter__(self) -> "SimHost":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def _start(self) -> None:
+        env = dict(os.environ)
+        # plugins importable in the parent (installed, or on a test's sys.path) must be importable here too
+        env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
+        self.proc = subprocess.Popen([sys.executable, "-m", "drivefuzz.simhost"], stdin=subprocess.PIPE,
+                                     stdout=subprocess.PIPE, env=env, close_fds=True)
+        self.starts += 1
+
+    def _kill(self) -> None:
+        if self.proc is None:
+            return
+        if self.proc.poll() is None:
+            self.proc.kill()
+        self.proc.wait()
+        for fh in (self.proc.stdin, self.proc.stdout):
+            try:
+                fh.close()
+            except OSError:
+                pass
+        self.proc = None
+
+    def close(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            try:
+                _send(self.proc.stdin, ("exit",))
+                self.proc.wait(timeout=5)
+            except (OSError, subprocess.TimeoutExpired):
+                pass
+        self._kill()
+
+    def execute(self, scenario, oracle_settings: dict[str, Any] | None = None) -> Outcome:
+        """Run ``scenario`` with the oracles of ``oracle_settings`` (OracleSettings.settings) in the child."""
+        if self.proc is None or self.proc.poll() is not None:
+            self._kill()
+            self._start()
+        t0 = time.monotonic()
+        request = ("execute", scenario.model_dump(mode="json"), oracle_settings or {})
+        try:
+            _send(self.proc.stdin, request)
+        except (BrokenPipeError, OSError):
+            pass  # the child is already dead; reading below says how
+        deadline = None if self.timeout_s is None else t0 + self.timeout_s
+        fd = self.proc.stdout.fileno()
+        try:
+            header = _read_exact(fd, _HEADER.size, deadline)
+            body = None if header is None else _read_exact(fd, _HEADER.unpack(header)[0], deadline)
+        except TimeoutError:
+            self._kill()
+            return Outcome(HANG, detail=f"no result within {self.timeout_s:g} s wall-clock",
+                           error_type="timeout", wall_time=time.monotonic() - t0)
+        if body is None:
+            rc = self.proc.wait()
+            self._kill()
+            name = _signal_name(rc)
+            return Outcome(CRASH, detail=f"simulation process died: {name}", error_type=name,
+                           wall_time=time.monotonic() - t0)
+        reply = pickle.loads(body)
+        wall = time.monotonic() - t0
+        if reply[0] == OK:
+            return Outcome(OK, execution=reply[1], wall_time=wall)
+        _, status, error_type, detail, tb = reply
+        return Outcome(status, detail=detail, error_type=error_type, traceback=tb, wall_time=wall)
+
+
+# ------------------------------------------------------------------------ child side
+def _watch_parent(parent: int) -> None:
+    while True:
+        time.sleep(0.5)
+        if os.getppid() != parent:  # the parent died (SIGKILL skips every cleanup): do not outlive it
+            os._exit(0)
+
+
+def _serve() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
+    inp, out = sys.stdin.buffer, sys.stdout.buffer
+    sys.stdout = sys.stderr  # a print() in a plugin must not corrupt the protocol
+
+    from drivefuzz.execute import execute
+    from drivefuzz.oracle import OracleSettings
+    from drivefuzz.scenario import Scenario
+
+    while True:
+        header = inp.read(_HEADER.size)
+        if len(header) < _HEADER.size:
+            return
+        msg = pickle.loads(inp.read(_HEADER.unpack(header)[0]))
+        if msg[0] == "exit":
+            return
+        _, scenario_json, settings = msg
+        try:
+            sc = Scenario.model_validate(scenario_json)
+            ex = execute(sc, oracles=OracleSettings(settings=settings).instantiate())
+            reply: tuple = (OK, ex)
+        except PluginError as exc:
+            reply = ("error", PLUGIN_ERROR, type(exc.__cause__ or exc).__name__, _one_line(exc), traceback.format_exc())
+        except Exception as exc:  # noqa: BLE001 - reported to the parent, which records it and goes on
+            status = INTERNAL_ERROR
+            reply = ("error", status, type(exc).__name__, _one_line(exc), traceback.format_exc())
+        _send(out, reply)
+
+
+def _one_line(exc: BaseException) -> str:
+    text = f"{type(exc).__name__}: {exc}" if not isinstance(exc, (PluginError, SimulationError)) else str(exc)
+    return " ".join(text.split())[:500]
+
+
+if __name__ == "__main__":
+    _serve()

@@ -1,0 +1,33 @@
+"""An ADS that fails on purpose, for the crash-isolation and distributed tests.
+
+Loaded as ``--ads crashy_plugins:FailingADS`` (the module is on the tests' path,
+which the simulation host and the test's Dask workers inherit).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from typing import Literal
+
+from ego.ads import ReferenceADS
+
+
+class FailingADS(ReferenceADS):
+    """The reference ADS until simulated time ``at``, then it aborts, hangs or raises."""
+
+    name = "failing"
+
+    class Options(ReferenceADS.Options):
+        failure: Literal["abort", "hang", "raise", "none"] = "abort"
+        at: float = 1.0  # [s] simulated time
+
+    def step(self, obs):
+        if obs.t >= self.options.at:
+            if self.options.failure == "abort":
+                os.abort()  # what a segfault in native code looks like to the caller
+            if self.options.failure == "hang":
+                time.sleep(3600)
+            if self.options.failure == "raise":
+                raise ZeroDivisionError("planned failure")
+        return super().step(obs)
