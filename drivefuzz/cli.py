@@ -186,7 +186,7 @@ def _progress_printer():
             return
         last[0] = now
         best = "-" if p.best_score is None else f"{p.best_score:.1f}"
-        where = (f"seed {p.seed_index}  cycle {p.cycle}" if p.jobs_running <= 1
+        where = (f"seed {p.seed_index}  cycle {p.cycle}" if p.jobs_running == 1
                  else f"jobs {p.jobs_done}/{p.jobs_total} done, {p.jobs_running} running")
         line = f"execs {p.execs}  {p.rate:.2f}/s  {where}  best score {best}  findings {p.findings}"
         click.echo(("\r" + line + "   ") if tty else line, err=True, nl=not tty)
@@ -328,7 +328,7 @@ def _print_summary(campaign, findings, out_dir) -> None:
         click.echo(f"stopped; continue with: drivefuzz fuzz --resume {out_dir}", err=True)
 
 
-def _seeds_for(network: str, seeds_dir: str | None):
+def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
     from drivefuzz.roadmap import load_roadmap
     from drivefuzz.seed import generate_seeds, list_seeds
     from drivefuzz.sumofiles import load_scenario, write_scenario
@@ -344,14 +344,115 @@ def _seeds_for(network: str, seeds_dir: str | None):
                 sc = sc.model_copy(update={"network": str(Path(network).resolve())})
             seeds.append(sc)
         return seeds
-    click.echo(f"no seeds in {folder}: generating and verifying 4 for {rmap.path.name}...", err=True)
-    seeds = generate_seeds(network, 4, 0)
+    click.echo(f"no seeds in {folder}: generating and verifying {count} for {rmap.path.name}...", err=True)
+    seeds = generate_seeds(network, count, 0)
     if not seeds:
         raise InvalidConfig(network, None, "could not generate a seed mission that the reference ADS completes",
                             "a network with connected passenger roads")
     for i, sc in enumerate(seeds):
         write_scenario(sc, folder / f"{i:03d}")
     return seeds
+
+
+# ------------------------------------------------------------------------ campaign
+@main.command()
+@click.argument("campaign_file", type=click.Path(), required=False)
+@click.option("-o", "out", type=click.Path(file_okay=False), help="Output directory (default: new under ./drivefuzz-out/).")
+@click.option("--resume", "resume_dir", type=click.Path(file_okay=False), help="Continue the batch in this directory.")
+@handle_errors
+def campaign(campaign_file, out, resume_dir):
+    """Run a batch: every cell of CAMPAIGN_FILE's matrix (networks x strategies x ADS x seeds) on Dask."""
+    from drivefuzz.batch import CampaignFile, cells, load_campaign_file, results_table, write_results
+    from drivefuzz.cluster import BATCH_SYSTEMS, dask_client
+    from drivefuzz.fuzz import Campaign, FuzzConfig, run_on_dask
+    from drivefuzz.oracle import OracleSettings
+    from drivefuzz.storage import atomic_write_json
+
+    if resume_dir:
+        out_dir = Path(resume_dir)
+        path = out_dir / "campaign.json"
+        if not path.is_file():
+            raise InvalidConfig(resume_dir, None, "not a campaign directory (no campaign.json)",
+                                "a directory written by 'drivefuzz campaign'")
+        try:
+            spec = CampaignFile.model_validate_json(path.read_text())
+        except ValueError as exc:
+            raise InvalidConfig(str(path), None, f"unreadable ({str(exc).splitlines()[0]})") from None
+    else:
+        if not campaign_file:
+            raise InvalidConfig("campaign", "CAMPAIGN_FILE", "missing", "a TOML file, or --resume DIR")
+        spec = load_campaign_file(campaign_file)
+        settings = OracleSettings(settings=spec.oracles)
+        settings.instantiate()  # unknown oracles or settings fail now, with the file's name
+        out_dir = Path(out) if out else Path("drivefuzz-out") / time.strftime("campaign-%Y%m%d-%H%M%S")
+        if out_dir.exists() and any(out_dir.iterdir()):
+            raise InvalidConfig("-o", str(out_dir), "output directory exists and is not empty",
+                                "a new directory, or --resume to continue it")
+        out_dir.mkdir(parents=True, exist_ok=True)
+        atomic_write_json(out_dir / "campaign.json", spec.model_dump(mode="json"))
+    c = spec.campaign
+    budget_s = parse_duration(c.budget)
+    argv = ["drivefuzz", *sys.argv[1:]]
+    work, campaigns = [], []
+    totals = _batch_progress(campaigns)
+    for name, network, strategy, ads, seed in cells(spec):
+        seeds = _seeds_for(network, None, count=c.seeds_per_network)[:c.seeds_per_network]
+        cfg = FuzzConfig(cycles=c.cycles, population=c.population, strategy=strategy, seed=seed, budget_s=budget_s,
+                         max_execs=c.max_execs, feedback=not c.no_feedback,
+                         continue_after_finding=c.continue_after_finding, ads=ads,
+                         oracles=OracleSettings(settings=spec.oracles), mutation=spec.mutation, quality=spec.quality,
+                         time_limit=c.time_limit, exec_timeout_s=c.exec_timeout)
+        cell_dir = out_dir / "cells" / name
+        camp = Campaign(cell_dir, seeds, cfg, argv, on_progress=totals)
+        work.append((camp, camp.prepare(resume=(cell_dir / "manifest.json").exists())))
+        campaigns.append(camp)
+
+    def _stop(signum, _frame):
+        for camp in campaigns:
+            camp.stop_requested = True
+        click.echo("\nstopping after the current executions (Ctrl-C again to abort)...", err=True)
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    old = signal.signal(signal.SIGINT, _stop)
+    where = spec.run.where
+    click.echo(f"{len(campaigns)} cell(s) on {where} -> {out_dir}", err=True)
+    try:
+        with dask_client(where, jobs=spec.run.jobs, batch=spec.cluster if where in BATCH_SYSTEMS else None) as client:
+            run_on_dask(client, work, max_running=spec.run.cells_at_once)
+    finally:
+        signal.signal(signal.SIGINT, old)
+        rows = results_table(out_dir, spec)
+        write_results(out_dir, rows)
+    click.echo("", err=True)
+    click.echo(f"{'cell':<44} {'execs':>6} {'found':>6} {'distinct':>8}  status")
+    for r in rows:
+        click.echo(f"{r['cell']:<44} {r['execs']:>6} {r['findings']:>6} {r['distinct']:>8}  {r['status']}")
+    click.echo(f"results in {out_dir / 'results.csv'}")
+    if any(r["status"] != "done" for r in rows):
+        click.echo(f"continue with: drivefuzz campaign --resume {out_dir}", err=True)
+    failed = any(camp.failed_jobs for camp in campaigns)
+    sys.exit(EXIT_FOUND if any(r["findings"] for r in rows) else (EXIT_INTERNAL if failed else EXIT_CLEAN))
+
+
+def _batch_progress(campaigns):
+    show = _progress_printer()
+
+    def update(_p):
+        from drivefuzz.fuzz import Progress
+
+        total = Progress(jobs_total=sum(c.progress.jobs_total for c in campaigns))
+        total.started = min((c.progress.started for c in campaigns), default=total.started)
+        for c in campaigns:
+            p = c.progress
+            total.execs += p.execs
+            total.new_execs += p.new_execs
+            total.findings += p.findings
+            total.jobs_done += p.jobs_done
+            total.jobs_running += p.jobs_running
+            if p.best_score is not None and (total.best_score is None or p.best_score < total.best_score):
+                total.best_score = p.best_score
+        show(total)
+    return update
 
 
 # -------------------------------------------------------------------------- replay

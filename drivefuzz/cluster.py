@@ -42,6 +42,7 @@ class BatchSpec(BaseModel):
     walltime: str = Field(default="04:00:00")
     max_jobs: int = Field(default=4, ge=1, description="batch jobs at most (adaptive)")
     prologue: list[str] = Field(default_factory=list, description="shell lines before the worker starts, e.g. activating a venv")
+    python: str | None = Field(default=None, description="the workers' Python (default: the one running drivefuzz)")
     local_directory: str | None = None
     log_directory: str | None = None
 
@@ -58,6 +59,8 @@ def make_batch_cluster(spec: BatchSpec):
                                   queue=spec.queue, job_script_prologue=list(spec.prologue))
     if spec.account:
         kwargs["account" if spec.backend != "lsf" else "project"] = spec.account
+    if spec.python:
+        kwargs["python"] = spec.python
     if spec.local_directory:
         kwargs["local_directory"] = spec.local_directory
     if spec.log_directory:

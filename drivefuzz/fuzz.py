@@ -236,18 +236,21 @@ class Campaign:
             return True
         return self.cfg.max_execs is not None and self.progress.execs >= self.cfg.max_execs
 
-    def _request_stop(self) -> None:
+    def request_stop(self) -> None:
         (self.out / STOP_FILE).touch()
 
     # --------------------------------------------------------------------- run
     def run(self, resume: bool = False, client=None) -> list[Finding]:
         """Run every unfinished seed job; with a Dask ``client`` at once on its workers."""
         pending = self.prepare(resume)
-        self._deadline = None if self.cfg.budget_s is None else time.monotonic() + self.cfg.budget_s
         if client is None:
+            self._deadline = None if self.cfg.budget_s is None else time.monotonic() + self.cfg.budget_s
             self._run_here(pending)
         else:
-            self._run_on(client, pending)
+            run_on_dask(client, [(self, pending)])
+        return self.finish()
+
+    def finish(self) -> list[Finding]:
         self.poll()
         self.findings.sort(key=lambda f: f.path.name)
         return self.findings
@@ -262,37 +265,62 @@ class Campaign:
             if summary["status"] == "done":
                 self.progress.jobs_done += 1
 
-    def _run_on(self, client, pending: list[int]) -> None:
-        from distributed import wait
-
+    def submit(self, client, pending: list[int]) -> dict[Any, int]:
+        """Submit the pending seed jobs to Dask; the budget clock starts when this is called."""
+        self._deadline = None if self.cfg.budget_s is None else time.monotonic() + self.cfg.budget_s
         tag = f"{self.out.resolve().name}-{os.getpid()}"
-        futures = {client.submit(run_seed_job, str(self.out.resolve()), si, key=f"drivefuzz-{tag}-seed{si:03d}",
-                                 pure=False, retries=1): si for si in pending}
-        stop_sent = False
-        try:
-            while futures:
+        return {client.submit(run_seed_job, str(self.out.resolve()), si, key=f"drivefuzz-{tag}-seed{si:03d}",
+                              pure=False, retries=1): si for si in pending}
+
+
+def run_on_dask(client, work: list[tuple[Campaign, list[int]]], max_running: int | None = None) -> None:
+    """Run the pending jobs of several campaigns on one Dask client, following their journals.
+
+    Campaigns start in order, at most ``max_running`` at once (all by default), so
+    that each one's wall-clock budget is spent on the cluster, not in a queue.
+    Only this process writes the campaigns' indexes.
+    """
+    from distributed import wait
+
+    queue = list(work)
+    active: dict[Any, tuple[Campaign, int]] = {}
+    running: list[Campaign] = []
+    stopped: set[int] = set()
+    try:
+        while queue or active:
+            while queue and (max_running is None or len(running) < max_running):
+                campaign, pending = queue.pop(0)
+                running.append(campaign)
+                active.update({f: (campaign, si) for f, si in campaign.submit(client, pending).items()})
+            if active:
                 try:
-                    wait(list(futures), timeout=0.5, return_when="FIRST_COMPLETED")
+                    wait(list(active), timeout=0.5, return_when="FIRST_COMPLETED")
                 except TimeoutError:
                     pass
-                self.poll()
-                if not stop_sent and self.out_of_budget():
-                    self._request_stop()
-                    stop_sent = True
-                for fut in [f for f in futures if f.done()]:
-                    si = futures.pop(fut)
-                    try:
-                        summary = fut.result()
-                    except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: report, keep the rest going
-                        self.failed_jobs[si] = f"{type(exc).__name__}: {exc}"
-                        continue
-                    if summary["status"] == "done":
-                        self.progress.jobs_done += 1
-                self.progress.jobs_running = sum(1 for f in futures if f.status == "pending")
-                self.on_progress(self.progress)
-        except BaseException:  # Ctrl-C twice, or the client lost the scheduler: stop the jobs, keep their work
-            self._request_stop()
-            raise
+            for campaign in running:
+                campaign.poll()
+                if id(campaign) not in stopped and campaign.out_of_budget():
+                    campaign.request_stop()
+                    stopped.add(id(campaign))
+            for fut in [f for f in active if f.done()]:
+                campaign, si = active.pop(fut)
+                try:
+                    summary = fut.result()
+                except Exception as exc:  # noqa: BLE001 - e.g. KilledWorker: report it, keep the rest going
+                    campaign.failed_jobs[si] = f"{type(exc).__name__}: {exc}"
+                    continue
+                if summary["status"] == "done":
+                    campaign.progress.jobs_done += 1
+            for campaign in list(running):
+                left = [f for f, (c, _) in active.items() if c is campaign]
+                campaign.progress.jobs_running = len(left)
+                campaign.on_progress(campaign.progress)
+                if not left:
+                    running.remove(campaign)
+    except BaseException:  # Ctrl-C twice, or the client lost the scheduler: stop the jobs, keep their work
+        for campaign, _ in work:
+            campaign.request_stop()
+        raise
 
 
 def load_campaign(out: str | os.PathLike) -> tuple[list[Scenario], FuzzConfig, list[str]]:

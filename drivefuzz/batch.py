@@ -1,0 +1,187 @@
+"""Batch campaigns: a matrix of networks x strategies x ADS configurations x campaign seeds, from one TOML file.
+
+``drivefuzz campaign CAMPAIGN.toml -o DIR`` runs every cell of the matrix as its
+own fuzz campaign (``DIR/cells/<cell>/``, the same layout as ``drivefuzz fuzz -o``)
+on one Dask client, and writes ``DIR/results.csv`` and ``DIR/results.md``: one row
+per cell. ``drivefuzz campaign --resume DIR`` continues it. Example::
+
+    [campaign]
+    budget = "10m"            # wall-clock budget of each cell (and/or max_execs)
+    cycles = 10
+    population = 8
+    seeds_per_network = 8     # seed missions per network (seeds/<net>/, generated when missing)
+
+    [matrix]
+    networks = ["networks/town.net.xml", "networks/highway.net.xml"]
+    strategies = ["all", "entropy"]
+    seeds = [0, 1, 2]         # campaign RNG seeds: repetitions
+    ads = [{name = "ego"}, {name = "ego", options = {fault = "speeding"}}]
+
+    [run]
+    where = "slurm"           # local | tcp://HOST:PORT | scheduler.json | slurm | pbs | sge | lsf
+    jobs = 2                  # local workers (where = "local")
+    cells_at_once = 4         # cells running at the same time (default: all)
+
+    [cluster]                 # batch systems only: see drivefuzz.cluster.BatchSpec
+    queue = "normal"
+    cores = 16
+    memory = "32GB"
+    walltime = "04:00:00"
+    max_jobs = 10
+    prologue = ["source ~/venvs/drivefuzz/bin/activate"]
+
+    [oracles.speeding]        # oracle settings for every cell, as in drivefuzz fuzz --config
+    tolerance = 0.5
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import itertools
+import json
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from drivefuzz.cluster import BATCH_SYSTEMS, BatchSpec
+from drivefuzz.errors import InvalidConfig
+from drivefuzz.mutate import MutationConfig
+from drivefuzz.quality import QualityConfig
+from drivefuzz.scenario import AdsSpec
+
+STRATEGIES = ("all", "congestion", "entropy", "instability", "maneuver", "mix")
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+
+class CampaignSection(_Strict):
+    budget: str | None = Field(default=None, description="per cell, e.g. 10m")
+    max_execs: int | None = Field(default=None, ge=1, description="per cell")
+    cycles: int = Field(default=10, ge=1)
+    population: int = Field(default=8, ge=1)
+    seeds_per_network: int = Field(default=8, ge=1)
+    time_limit: float | None = Field(default=None, gt=0)
+    continue_after_finding: bool = False
+    no_feedback: bool = False
+    exec_timeout: float = Field(default=300.0, gt=0)
+
+
+class MatrixSection(_Strict):
+    networks: list[str] = Field(min_length=1)
+    strategies: list[str] = Field(default_factory=lambda: ["all"], min_length=1)
+    seeds: list[int] = Field(default_factory=lambda: [0], min_length=1)
+    ads: list[AdsSpec] = Field(default_factory=lambda: [AdsSpec()], min_length=1)
+
+
+class RunSection(_Strict):
+    where: str = "local"
+    jobs: int = Field(default=2, ge=1)
+    cells_at_once: int | None = Field(default=None, ge=1)
+
+
+class CampaignFile(_Strict):
+    campaign: CampaignSection = Field(default_factory=CampaignSection)
+    matrix: MatrixSection
+    run: RunSection = Field(default_factory=RunSection)
+    cluster: BatchSpec = Field(default_factory=BatchSpec)
+    oracles: dict[str, dict[str, Any]] = Field(default_factory=dict)
+    mutation: MutationConfig = Field(default_factory=MutationConfig)
+    quality: QualityConfig = Field(default_factory=QualityConfig)
+
+
+def load_campaign_file(path: str | Path) -> CampaignFile:
+    """Parse and validate a campaign file; every mistake is one line naming the file and the field."""
+    path = Path(path)
+    if not path.is_file():
+        raise InvalidConfig(str(path), None, "no such campaign file", "a TOML file with [matrix] networks = [...]")
+    try:
+        data = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InvalidConfig(str(path), None, f"cannot parse ({exc})", "valid TOML") from None
+    try:
+        spec = CampaignFile.model_validate(data)
+    except ValidationError as exc:
+        err = exc.errors()[0]
+        raise InvalidConfig(str(path), ".".join(str(p) for p in err["loc"]), err["msg"]) from None
+    for s in spec.matrix.strategies:
+        if s not in STRATEGIES:
+            raise InvalidConfig(str(path), "matrix.strategies", f"unknown strategy {s!r}", ", ".join(STRATEGIES))
+    where = spec.run.where
+    if where != "local" and where not in BATCH_SYSTEMS and "://" not in where and not where.endswith(".json"):
+        raise InvalidConfig(str(path), "run.where", f"cannot use {where!r}",
+                            "local, tcp://HOST:PORT, a scheduler .json file, " + ", ".join(BATCH_SYSTEMS))
+    base = path.parent
+    nets = []
+    for n in spec.matrix.networks:
+        p = Path(n) if Path(n).is_absolute() or Path(n).exists() else base / n
+        if not p.is_file():
+            raise InvalidConfig(str(path), "matrix.networks", f"no such network {n!r}", "paths to .net.xml files")
+        nets.append(str(p.resolve()))
+    spec.matrix.networks = nets
+    return spec
+
+
+def cell_name(network: str, strategy: str, ads: AdsSpec, seed: int) -> str:
+    opts = ""
+    if ads.options:
+        opts = "-" + hashlib.sha1(json.dumps(ads.options, sort_keys=True).encode()).hexdigest()[:6]
+    return f"{Path(network).name.split('.')[0]}-{strategy}-{ads.name.replace(':', '.')}{opts}-s{seed}"
+
+
+def cells(spec: CampaignFile) -> list[tuple[str, str, str, AdsSpec, int]]:
+    """(name, network, strategy, ads, seed) of every cell, in a fixed order."""
+    m = spec.matrix
+    return [(cell_name(n, s, a, k), n, s, a, k) for n, s, a, k in itertools.product(m.networks, m.strategies, m.ads, m.seeds)]
+
+
+def results_table(out: Path, spec: CampaignFile) -> list[dict[str, Any]]:
+    """One row per cell from the cells' own directories (so it is right after a resume too)."""
+    import sqlite3
+
+    rows = []
+    for name, network, strategy, ads, seed in cells(spec):
+        d = out / "cells" / name
+        row: dict[str, Any] = {"cell": name, "network": Path(network).name, "strategy": strategy, "ads": ads.name,
+                               "ads_options": json.dumps(ads.options, sort_keys=True), "seed": seed,
+                               "execs": 0, "findings": 0, "distinct": 0, "by_oracle": "", "status": "not started"}
+        if (d / "index.sqlite").exists():
+            db = sqlite3.connect(d / "index.sqlite")
+            row["execs"] = db.execute("SELECT COUNT(*) FROM executions").fetchone()[0]
+            db.close()
+            from drivefuzz.fuzz import load_finding
+
+            found = [load_finding(v.parent) for v in sorted((d / "findings").glob("*/verdict.json"))]
+            row["findings"] = len(found)
+            row["distinct"] = len({f.misbehavior.signature() for f in found})
+            counts: dict[str, int] = {}
+            for f in found:
+                counts[f.misbehavior.oracle] = counts.get(f.misbehavior.oracle, 0) + 1
+            row["by_oracle"] = " ".join(f"{k}:{v}" for k, v in sorted(counts.items()))
+            manifest = json.loads((d / "manifest.json").read_text())
+            done = sum((d / "jobs" / f"{i:03d}" / "summary.json").exists() for i in range(len(manifest["seeds"])))
+            row["status"] = "done" if done == len(manifest["seeds"]) else f"{done}/{len(manifest['seeds'])} seeds done"
+        rows.append(row)
+    return rows
+
+
+def write_results(out: Path, rows: list[dict[str, Any]]) -> None:
+    from drivefuzz.storage import atomic_write_text
+
+    if not rows:
+        return
+    import io
+
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(rows[0]))
+    w.writeheader()
+    w.writerows(rows)
+    atomic_write_text(out / "results.csv", buf.getvalue())
+    cols = ["cell", "execs", "findings", "distinct", "by_oracle", "status"]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    lines += ["| " + " | ".join(str(r[c]) for c in cols) + " |" for r in rows]
+    atomic_write_text(out / "results.md", "\n".join(lines) + "\n")

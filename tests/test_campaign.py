@@ -1,0 +1,103 @@
+"""`drivefuzz campaign`: the matrix file, a real run on a local Dask cluster, resume, and the Slurm example."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import pytest
+from click.testing import CliRunner
+
+from drivefuzz.batch import cells, load_campaign_file
+from drivefuzz.cli import main
+from drivefuzz.errors import InvalidConfig
+
+from conftest import ROOT, TOWN
+
+pytestmark = pytest.mark.timeout(240)
+
+SMALL = f"""
+[campaign]
+max_execs = 2
+cycles = 1
+population = 2
+seeds_per_network = 1
+time_limit = 30
+
+[matrix]
+networks = ["{TOWN}"]
+strategies = ["all", "entropy"]
+seeds = [0]
+ads = [{{name = "ego", options = {{fault = "speeding"}}}}]
+
+[run]
+where = "local"
+jobs = 2
+"""
+
+
+def test_small_campaign_runs_every_cell_and_resumes(tmp_path):
+    spec_file = tmp_path / "c.toml"
+    spec_file.write_text(SMALL)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["campaign", str(spec_file), "-o", str(out)])
+    assert result.exit_code == 1, result.output  # the faulty ADS is found speeding
+    rows = list(csv.DictReader((out / "results.csv").open()))
+    assert [r["cell"] for r in rows] == ["town-all-ego-f1bffd-s0", "town-entropy-ego-f1bffd-s0"]
+    for r in rows:
+        assert r["status"] == "done" and int(r["execs"]) >= 1 and int(r["findings"]) >= 1
+        assert (out / "cells" / r["cell"] / "index.sqlite").exists()
+    assert any("speeding:" in r["by_oracle"] for r in rows)
+    before = {p.name for r in rows for p in (out / "cells" / r["cell"] / "findings").iterdir()}
+    again = CliRunner().invoke(main, ["campaign", "--resume", str(out)])
+    assert again.exit_code == 1, again.output
+    after = {p.name for r in rows for p in (out / "cells" / r["cell"] / "findings").iterdir()}
+    assert after == before  # every cell was done: nothing re-run, nothing lost
+
+
+@pytest.mark.parametrize("text, field", [
+    ("[matrix]\nnetworks = []\n", "matrix.networks"),
+    ("[matrix]\nnetworks = ['nowhere.net.xml']\n", "matrix.networks"),
+    (f"[matrix]\nnetworks = ['{TOWN}']\nstrategies = ['chaos']\n", "matrix.strategies"),
+    (f"[matrix]\nnetworks = ['{TOWN}']\n[run]\nwhere = 'moon'\n", "run.where"),
+    (f"[matrix]\nnetworks = ['{TOWN}']\n[cluster]\ncores = 0\n", "cluster.cores"),
+    (f"[matrix]\nnetworks = ['{TOWN}']\n[campaign]\nbudgett = '1m'\n", "campaign.budgett"),
+])
+def test_bad_campaign_file_is_one_line_naming_the_field(tmp_path, text, field):
+    f = tmp_path / "bad.toml"
+    f.write_text(text)
+    with pytest.raises(InvalidConfig) as err:
+        load_campaign_file(f)
+    assert str(f) in str(err.value) and field in str(err.value)
+    result = CliRunner().invoke(main, ["campaign", str(f), "-o", str(tmp_path / "o")])
+    assert result.exit_code == 2 and len(result.output.strip().splitlines()) == 1 and field in result.output
+
+
+def test_readme_slurm_example_makes_a_valid_job_script():
+    from drivefuzz.cluster import make_batch_cluster
+
+    example = ROOT / "examples" / "slurm-campaign.toml"
+    assert example.read_text().strip() in (ROOT / "README.md").read_text()  # the README shows this very file
+    spec = load_campaign_file(example)
+    assert len(cells(spec)) == 24 and spec.run.where == "slurm"
+    cluster = make_batch_cluster(spec.cluster.model_copy(update={"backend": spec.run.where}))
+    try:
+        script = cluster.job_script()
+    finally:
+        cluster.close()
+    assert script.startswith("#!/usr/bin/env bash")
+    for line in ("#SBATCH -p normal", "#SBATCH -A myproject", "#SBATCH -n 1", "#SBATCH --cpus-per-task=16",
+                 "#SBATCH --mem=30G", "#SBATCH -t 04:00:00", "source ~/venvs/drivefuzz/bin/activate"):
+        assert line in script, (line, script)
+    worker = next(line for line in script.splitlines() if "distributed.cli.dask_worker" in line)
+    assert "--nthreads 1" in worker and "--nworkers 16" in worker and "--nanny" in worker
+    assert "--lifetime 13800s" in worker  # retire 10 minutes before the 4 h walltime
+
+
+def test_campaign_json_records_the_resolved_matrix(tmp_path):
+    spec_file = tmp_path / "c.toml"
+    spec_file.write_text(SMALL.replace("max_execs = 2", "max_execs = 1").replace('"all", "entropy"', '"all"'))
+    out = tmp_path / "out"
+    CliRunner().invoke(main, ["campaign", str(spec_file), "-o", str(out)])
+    saved = json.loads((out / "campaign.json").read_text())
+    assert saved["matrix"]["networks"] == [str(TOWN.resolve())] and saved["campaign"]["max_execs"] == 1
