@@ -51,26 +51,43 @@ Units and definitions (decisions documented here once)
   The universe tops are configurable (``os_sa_max_deg``, ``os_la_max_g``,
   ``os_yr_max_degs``); the triangles scale with them. A frame counts when ``OSI >= 4``,
   ``Vx_f > 5 km/h`` and ``dAy > 0.1 g``.
-* **Understeer**: the steering-to-lateral-acceleration gain is computed where
-  ``SWA_h >= 10 deg`` and ``Vx_f > 5 km/h`` (NaN elsewhere). By default it is the
-  *speed-normalised* gain ``Ay_h / (SWA_h * Vx_h^2)`` (path curvature per steering-wheel
-  radian, 1/(m rad), ``Vx_h = |LP(V_x,0.5)|``), which is constant in a turn driven at any
-  speed with grip, so slowing down in a bend is not mistaken for understeer; set
-  ``us_gain="raw"`` for the literal ``Ay_h/SWA_h`` (g/deg). ``peak`` is the gain's maximum over the
-  trailing ``us_peak_window_s`` (2 s, current frame included) and
-  ``FD = (peak - gain) / peak`` in [0, 1] is the fractional **drop** below that recent
-  peak (0 without a valid gain). **Fix:** the original's ``(gain - peak)/peak`` fired at the
-  gain's local maxima instead. The fuzzy system keeps the original's rule
+* **Understeer**: the steering-to-lateral-acceleration gain ``Ay_h / (SWA_h * Vx_h^2)``
+  (``Vx_h = |LP(V_x,0.5)|``: path curvature per steering-wheel radian, 1/(m rad), constant in
+  a turn driven with grip at any speed, so slowing down in a bend is not mistaken for
+  understeer; ``us_gain="raw"`` gives the literal ``Ay_h/SWA_h`` in g/deg). Here ``A_y`` is
+  ``vx * yaw_rate`` (``us_ay="centripetal"``, the default): the trace's measured ``ay`` also
+  holds ``d(vy)/dt``, which at junction speeds doubles the apparent gain while the car turns
+  in and shrinks it while it unwinds, although the car follows its steering exactly
+  (``us_ay="measured"`` uses it anyway). The gain is *read* only where it means something:
+  ``SWA_h >= 10 deg``, ``Vx_f > 5 km/h``, the car turns the way it is steered
+  (``sign LP(A_y) = sign LP(SWA)``), and the steering is quasi-steady,
+  ``|d SWA_h/dt| / SWA_h <= us_max_steer_rate`` (0.5 1/s): the lateral acceleration lags the
+  steering, so during a ramp the ratio dips by ``lag * rate`` with no loss of grip.
+  ``peak`` is the gain's maximum over the trailing ``us_peak_window_s`` (2 s, current frame
+  included) *within the current turn* (the reference restarts when ``LP(SWA)`` changes sign),
+  and ``FD = (peak - gain) / peak`` in [0, 1] is the fractional **drop** below that recent
+  peak (0 where the gain is not read). **Fix:** the original's ``(gain - peak)/peak`` fired at
+  the gain's local maxima instead. The fuzzy system keeps the original's rule
   ``FD high (0,1,1) -> us high (0,10,10)`` and adds its complement
   ``FD low (0,0,1) -> us low (0,0,10)``: with the single rule any FD > 0 gives
   USI ~ 5.25 >= 4 (a step at 0+, so numerical jitter would fire), with both rules USI rises
   monotonically from 3.33 (FD = 0) to 6.67 (FD = 1) and crosses 4 at FD ~ 0.29.
   A frame counts when ``USI >= 4``, ``Vx_f > 5 km/h`` and ``SWA_h > 10 deg``.
+  (Without the three reading conditions and with the measured ``ay``, clean runs of the
+  reference ADS counted 55-260 understeer frames each, about -150 per run: turn-in, unwinding
+  and zero crossings of the steering, not slides. With them clean seeds count 0; see
+  docs/quality.md.)
 * **md**: exact minimum distance between the ego's rectangle (``meta['ego_length']``,
   ``meta['ego_width']``, defaults 4.6 m x 1.9 m) and each actor's rectangle over all frames
   (:func:`drivefuzz.geometry.rect_distance`), 0 on contact. The term is
   ``c_md / max(md, md_eps)`` with ``md_eps = 0.1 m``, so contact gives a finite
   ``10 * c_md``; without any actor ``md`` is ``None`` and the term 0.
+
+Default weights and units of the score: every weight 1 and ``c_md = 1 m`` (the paper treats all
+factors equally), so each counted frame costs 1 point and an actor 1 m away costs 1 point
+(0.1 m or contact: 10 points, the ``md_eps`` floor). Counts are frames at the trace's step
+(0.05 s): they are not normalised by duration, as in the paper. SI in the trace; the paper's
+units (deg, km/h, deg/s, g) only inside :func:`signals` and the thresholds that use them.
 
 Missing channels (all NaN) fall back: ``vx`` <- ``speed``; ``ax`` <- d(vx)/dt; ``yaw_rate``
 <- d(heading)/dt; ``ay`` <- ``vx * yaw_rate``; ``steer_wheel_angle`` <- ``road_wheel_angle *
@@ -151,6 +168,12 @@ class QualityConfig(BaseModel):
     os_yr_max_degs: float = Field(45.0, gt=0, description="top of the oversteer yr universe [deg/s]")
     us_gain: Literal["speed_normalised", "raw"] = Field(
         "speed_normalised", description="understeer gain Ay_h/(SWA_h*Vx_h^2) or the literal Ay_h/SWA_h"
+    )
+    us_ay: Literal["centripetal", "measured"] = Field(
+        "centripetal", description="understeer A_y: vx*yaw_rate (steady-state part) or the trace's measured ay"
+    )
+    us_max_steer_rate: float = Field(
+        0.5, ge=0, description="[1/s] the gain is read only where |d SWA_h/dt| / SWA_h is at most this"
     )
     us_peak_window_s: float = Field(
         2.0, gt=0, description="[s] FD compares the gain with its max over this trailing window"
@@ -333,12 +356,24 @@ def _channels(trace) -> dict[str, np.ndarray]:
     return {"vx": vx, "vy": vy, "ax": ax, "ay": ay, "yaw_rate": yr, "swa": swa}
 
 
-def _trailing_max(v: np.ndarray, w: int) -> np.ndarray:
-    """max(v[i-w+1 .. i]) ignoring NaN (NaN if the whole window is NaN)."""
-    if w <= 1 or len(v) == 0:
+def _trailing_max(v: np.ndarray, w: int, segment: np.ndarray | None = None) -> np.ndarray:
+    """max(v[i-w+1 .. i]) ignoring NaN (NaN if the whole window is NaN).
+
+    With ``segment`` (an integer label per frame, non-decreasing) the window also stops at the
+    first frame of frame i's segment.
+    """
+    n = len(v)
+    if n == 0:
         return v.copy()
-    pad = np.concatenate([np.full(w - 1, -np.inf), np.where(np.isnan(v), -np.inf, v)])
-    m = np.lib.stride_tricks.sliding_window_view(pad, w).max(axis=-1)
+    w = max(1, min(int(w), n))
+    vv = np.where(np.isnan(v), -np.inf, v)
+    pad = np.concatenate([np.full(w - 1, -np.inf), vv])
+    win = np.lib.stride_tricks.sliding_window_view(pad, w)  # row i: v[i-w+1 .. i]
+    if segment is not None:
+        seg = np.concatenate([np.full(w - 1, -1), np.asarray(segment)])
+        same = np.lib.stride_tricks.sliding_window_view(seg, w) == np.asarray(segment)[:, None]
+        win = np.where(same, win, -np.inf)
+    m = win.max(axis=-1)
     return np.where(np.isneginf(m), np.nan, m)
 
 
@@ -358,8 +393,9 @@ def signals(trace, config: QualityConfig | None = None) -> dict[str, np.ndarray]
     ``SWA`` [deg, signed steering-wheel angle]; ``Vx`` [km/h, signed]; ``AVz`` yaw rate
     [deg/s, signed]; ``Ay`` [g, signed]; ``Vx_f`` = |LP(Vx, light)| [km/h]; ``dSWA`` = SA_d
     [deg]; ``dAy`` = Ay_d [g]; ``YR_h`` [deg/s]; ``OSI`` oversteer index [0..10]; ``SWA_h``
-    [deg]; ``Ay_h`` [g]; ``gain`` / ``peak`` understeer gain and its trailing peak (units per
-    ``config.us_gain``, NaN where not defined); ``FD`` fractional drop [0..1]; ``USI``
+    [deg]; ``Ay_h`` [g] (of the understeer A_y, see ``us_ay``); ``gain`` / ``peak``
+    understeer gain and its trailing peak (units per ``config.us_gain``, NaN where the gain
+    is not read); ``FD`` fractional drop [0..1]; ``USI``
     understeer index [0..10]; ``*_mask`` boolean detections for ha, hb, ht, os, us.
     """
     cfg = config or QualityConfig()
@@ -375,11 +411,14 @@ def signals(trace, config: QualityConfig | None = None) -> dict[str, np.ndarray]
     kab = ch["ax"] / cfg.g
 
     # light low-pass of SWA, Ay, Vx; heavy low-pass of those light outputs and of SWA, Ay, AVz, Vx
+    ay_us = ch["vx"] * ch["yaw_rate"] / cfg.g if cfg.us_ay == "centripetal" else ay
     light = _lowpass(np.stack([swa, ay, vx]), cfg.light_hz, fs, cfg.filter_order)
-    heavy = _lowpass(np.vstack([light[:2], np.stack([swa, ay, avz, vx])]), cfg.heavy_hz, fs, cfg.filter_order)
+    heavy = _lowpass(np.vstack([light[:2], np.stack([swa, ay_us, avz, vx])]), cfg.heavy_hz, fs, cfg.filter_order)
     d_swa = np.abs(light[0] - heavy[0])
     d_ay = np.abs(light[1] - heavy[1])
     swa_h, ay_h, yr_h, vx_h = (np.abs(heavy[k]) for k in range(2, 6))
+    swa_sign = np.sign(heavy[2])
+    same_sign = swa_sign * np.sign(heavy[3]) > 0  # the car turns the way it is steered
     vx_f = np.abs(light[2])
 
     # hard acceleration / braking / turn
@@ -397,7 +436,9 @@ def signals(trace, config: QualityConfig | None = None) -> dict[str, np.ndarray]
     os_mask = (osi >= cfg.os_threshold) & moving & (d_ay > cfg.os_min_ay_d_g)
 
     # understeer: fractional drop of the steering gain below its recent peak
+    steer_rate = np.abs(_deriv(swa_h, dt)) / np.maximum(swa_h, 1e-9)
     valid = (swa_h >= cfg.us_min_swa_h_deg) & moving & (swa_h > 0)
+    valid &= same_sign & (steer_rate <= cfg.us_max_steer_rate)
     with np.errstate(all="ignore"):
         if cfg.us_gain == "raw":
             gain = ay_h / swa_h
@@ -406,7 +447,9 @@ def signals(trace, config: QualityConfig | None = None) -> dict[str, np.ndarray]
             gain = (ay_h * cfg.g) / (np.radians(swa_h) * v_ms * v_ms)
     gain = np.where(valid & np.isfinite(gain), gain, np.nan)
     w = max(1, int(round(cfg.us_peak_window_s / dt)) + 1)
-    peak = _trailing_max(gain, w)
+    # a new turn (the filtered steering changes sign) starts a new reference
+    turn = np.concatenate([[0], np.cumsum(swa_sign[1:] != swa_sign[:-1])])
+    peak = _trailing_max(gain, w, turn)
     with np.errstate(all="ignore"):
         fd = np.where(np.isfinite(gain) & (peak > 0), (peak - gain) / peak, 0.0)
     fd = np.clip(fd, 0.0, 1.0)

@@ -201,6 +201,21 @@ def test_understeer_fuzzy_drop_side():
     assert float(understeer_index(5.0)) == pytest.approx(20 / 3)  # clamped
 
 
+def test_understeer_fuzzy_hand_point_quarter_drop():
+    # FD = 0.25: low = 0.75, high = 0.25; aggregate on x = 0..10:
+    # [.75 .75 .75 .7 .6 .5 .4 .3 .25 .25 .25] -> trapezoid centroid 58/15 (< 4: not counted)
+    assert float(understeer_index(0.25)) == pytest.approx(58 / 15)
+
+
+def test_oversteer_fuzzy_hand_point_all_medium():
+    # sa = 25, la = 0.25 are grid points where "med" = 1 and low = high = 0; yr = 22.5 lies
+    # between grid points 20 and 25 where med = 16/18.5 -> only the med triangle (1,5,9): 5
+    assert float(oversteer_index(25, 0.25, 22.5)) == pytest.approx(5.0)
+    # yr = 0 adds "low" = 1: aggregate max(low (0,0,4), med (1,5,9)) on x = 0..10 is
+    # [1 .75 .5 .5 .75 1 .75 .5 .25 0 0]; trapezoid centroid 257/66 (just below 4)
+    assert float(oversteer_index(25, 0.25, 0)) == pytest.approx(257 / 66)
+
+
 # --------------------------------------------------------------------------- detection on traces
 def test_understeer_fires_on_gain_drop():
     # SWA held at 90 deg while the lateral acceleration halves at 10-10.5 s (front grip lost)
@@ -225,6 +240,50 @@ def test_understeer_silent_when_braking_in_a_turn():
     tr = turning_trace(v=10 - 5 * smoothstep(t, 8, 10))
     assert score_trace(tr).us == 0
     assert score_trace(tr, QualityConfig(us_gain="raw")).us > 0  # the literal Ay_h/SWA_h would fire
+
+
+def test_understeer_not_read_while_the_steering_ramps():
+    """The lateral acceleration lags the steering (here 0.2 s): during a quick ramp from a held
+    15 deg to 135 deg the ratio Ay_h/SWA_h dips without any loss of grip. The gain is only read
+    where the steering is quasi-steady, so nothing fires; without that gate the dip counts."""
+    n = 400
+    t = np.arange(n) * DT
+    v = np.full(n, 10.0)
+    swa = math.radians(15) * smoothstep(t, 2, 3) + math.radians(120) * smoothstep(t, 8, 8.5)
+    ay = v**2 * np.interp(t - 0.2, t, swa, left=0.0) / L_RATIO
+    tr = make_trace(n, vx=v, ay=ay, yaw_rate=ay / v, steer_wheel_angle=swa)
+    assert score_trace(tr).us == 0
+    assert score_trace(tr, QualityConfig(us_max_steer_rate=1e9)).us > 0
+
+
+def _two_turns(same_side: bool, gain_2: float):
+    """Steer left to 90 deg at 3-4 s, then at 8-9 s to 180 deg (same side) or to -90 deg; the
+    gain from steering to lateral acceleration is ``gain_2`` times the first one from 8.5 s."""
+    n = 400
+    t = np.arange(n) * DT
+    v = np.full(n, 10.0)
+    swa = math.radians(90) * (smoothstep(t, 3, 4) + (1 if same_side else -2) * smoothstep(t, 8, 9))
+    gain = np.where(t < 8.5, 1.0, gain_2)
+    ay = v**2 * swa * gain / L_RATIO
+    return make_trace(n, vx=v, ay=ay, yaw_rate=ay / v, steer_wheel_angle=swa)
+
+
+def test_understeer_reference_resets_when_the_steering_changes_side():
+    # a 40 % lower gain in a turn to the other side is not a drop within one turn ...
+    assert score_trace(_two_turns(False, 0.6)).us == 0
+    # ... while the same drop while turning further the same way is understeer
+    assert score_trace(_two_turns(True, 0.6)).us > 0
+
+
+def test_understeer_uses_yaw_rate_by_default_and_measured_ay_on_request():
+    # the yaw rate (and so vx * yaw_rate) falls by half while the accelerometer's ay does not
+    base = turning_trace()
+    t = np.arange(400) * DT
+    yr = np.asarray(base["yaw_rate"]) * (1 - 0.5 * smoothstep(t, 10, 10.5))
+    tr = make_trace(400, vx=base["vx"], ax=base["ax"], ay=base["ay"], yaw_rate=yr,
+                    steer_wheel_angle=base["steer_wheel_angle"])
+    assert score_trace(tr).us > 0
+    assert score_trace(tr, QualityConfig(us_ay="measured")).us == 0
 
 
 def _yaw_surge_trace(peak_degs):
@@ -372,12 +431,15 @@ def test_md_pruning_matches_brute_force():
         actors.append({"id": f"a{k}", "kind": "vehicle", "length": rng.uniform(0.4, 12), "width": rng.uniform(0.4, 3),
                        "x": rng.uniform(-10, 70) + vv * math.cos(h) * t, "y": rng.uniform(-8, 8) + vv * math.sin(h) * t,
                        "heading": h + 0.1 * t, "speed": vv})
-    tr = make_trace(n, actors=actors, heading=0.05 * np.sin(t))
-    md, frame, aid = min_distance(tr)
-    a = tr.actors
-    f = a.frame
-    d = rect_distance(tr["x"][f], tr["y"][f], tr["heading"][f], EGO_L, EGO_W,
-                      a.x, a.y, a.heading, a.length[a.actor], a.width[a.actor])
-    assert md == pytest.approx(d.min(), abs=1e-12)
-    k = int(np.argmin(d))
-    assert d[k] == pytest.approx(md) and (frame, aid) == (int(f[k]), a.ids[a.actor[k]]) or md == 0.0
+    for ego_y in (0.0, -200.0):  # among the actors (some touch the ego), then clear of them all
+        tr = make_trace(n, actors=actors, heading=0.05 * np.sin(t), y=np.full(n, ego_y))
+        md, frame, aid = min_distance(tr)
+        a = tr.actors
+        f = a.frame
+        d = rect_distance(tr["x"][f], tr["y"][f], tr["heading"][f], EGO_L, EGO_W,
+                          a.x, a.y, a.heading, a.length[a.actor], a.width[a.actor])
+        assert md == pytest.approx(d.min(), abs=1e-12)
+        if ego_y < 0:
+            assert md > 5.0
+            k = int(np.argmin(d))
+            assert (frame, aid) == (int(f[k]), a.ids[a.actor[k]])
