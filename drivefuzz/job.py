@@ -138,6 +138,8 @@ class SeedJob:
         def should_stop() -> bool:
             return stop_file.exists() or user_stop()
 
+        if should_stop():  # before loading anything: queued jobs return at once when the budget is spent
+            return {"seed_index": self.si, "status": "stopped", "execs": None, "findings": [], "pid": os.getpid()}
         history = read_journal(self.journal)
         done = {r["key"]: r for r in history if r.get("event") == "end"}
         attempts = sum(1 for r in history if r.get("event") == "attempt") + 1
@@ -170,82 +172,99 @@ class SeedJob:
             current = load_scenario(self.out / ckpt["current"]).model_copy(update={"ads": cfg.ads})
         first_cycle = ckpt.get("cycle", 0)
         runner = _Runner(cfg)
-        try:
-            for cycle in range(first_cycle, cfg.cycles):
+        for cycle in range(first_cycle, cfg.cycles):
+            t0 = time.perf_counter()
+            gen = mutator.generate(current, cfg.strategy, random.Random(f"{cfg.seed}/{self.si}/{cycle}/generate"))
+            t_generate = time.perf_counter() - t0
+            population: list[tuple[float, Any]] = []
+            for member in range(cfg.population):
+                key = f"{self.si}/{cycle}/{member}"
                 t0 = time.perf_counter()
-                gen = mutator.generate(current, cfg.strategy, random.Random(f"{cfg.seed}/{self.si}/{cycle}/generate"))
-                t_generate = time.perf_counter() - t0
-                population: list[tuple[float, Any]] = []
-                for member in range(cfg.population):
-                    key = f"{self.si}/{cycle}/{member}"
-                    t0 = time.perf_counter()
-                    mut = mutator.mutate(gen.scenario, random.Random(f"{cfg.seed}/{self.si}/{cycle}/{member}"))
-                    t_mutate = time.perf_counter() - t0 + (t_generate if member == 0 else 0.0)
-                    child = mut.scenario
-                    if key in done:  # finished before a stop or a kill: reuse its result
-                        rec = done[key]
-                        if rec["score"] is not None:
-                            population.append((rec["score"], child))
-                        if rec["finding"] and not cfg.continue_after_finding:
-                            return "done"
-                        continue
-                    if should_stop():
-                        self._checkpoint(cycle, current)
-                        return "stopped"
-                    _append(self.journal, {"event": "start", "key": key, "hash": child.content_hash(),
-                                           "pid": os.getpid()})
-                    out = runner.execute(child)
-                    rec = {"event": "end", "key": key, "seed_index": self.si, "cycle": cycle, "member": member,
-                           "hash": child.content_hash(), "parent": current.content_hash(),
-                           "mutation": f"{gen.description} | {mut.description}",
-                           "retries": gen.retries + mut.retries, "finding": None, "score": None,
-                           "components": {}, "verdict": "pass", "pid": os.getpid()}
-                    timings = {"mutation": t_mutate, "isolation": 0.0}
-                    t_store = time.perf_counter()
-                    if out.status == OK:
-                        ex = out.execution
-                        timings.update(ex.timings)
-                        timings["isolation"] = max(out.wall_time - ex.wall_time, 0.0)
-                        rec.update(termination=ex.termination.value, frames=ex.trace.n_frames,
-                                   wall_time=round(ex.wall_time, 4))
-                        if ex.misbehaviors:
-                            m = ex.misbehaviors[0]
-                            t_store = time.perf_counter()
-                            rel = self._save_finding(child, list(ex.misbehaviors), key, ex.trace, ex.termination.value)
-                            rec.update(verdict=f"{m.oracle}/{m.kind}", finding=rel)
-                        else:
-                            from drivefuzz.quality import score_trace
-
-                            t0 = time.perf_counter()
-                            q = score_trace(ex.trace, cfg.quality)
-                            timings["quality"] = time.perf_counter() - t0
-                            rec.update(score=q.score, components=q.as_dict())
-                            population.append((q.score, child))
-                            t_store = time.perf_counter()
-                    else:  # the simulator crashed or hung, or a plugin raised: a finding of its own kind
-                        m = Misbehavior(oracle=out.status, kind=out.error_type or out.status, frame=-1, time=0.0,
-                                        position=(0.0, 0.0), details={"detail": out.detail})
-                        rel = self._save_finding(child, [m], key, None, out.status,
-                                                 {"error": {"status": out.status, "type": out.error_type,
-                                                            "detail": out.detail, "traceback": out.traceback}})
-                        rec.update(termination=out.status, frames=0, wall_time=round(out.wall_time, 4),
-                                   verdict=f"{m.oracle}/{m.kind}", finding=rel)
-                    timings["storage"] = time.perf_counter() - t_store
-                    rec["timings"] = {k: round(v, 6) for k, v in timings.items()}
-                    _append(self.journal, rec)
-                    done[key] = rec
-                    on_record(rec)
+                mut = mutator.mutate(gen.scenario, random.Random(f"{cfg.seed}/{self.si}/{cycle}/{member}"))
+                t_mutate = time.perf_counter() - t0 + (t_generate if member == 0 else 0.0)
+                child = mut.scenario
+                if key in done:  # finished before a stop or a kill: reuse its result
+                    rec = done[key]
+                    if rec["score"] is not None:
+                        population.append((rec["score"], child))
                     if rec["finding"] and not cfg.continue_after_finding:
                         return "done"
-                if population:
-                    if cfg.feedback:
-                        current = min(population, key=lambda p: p[0])[1]
+                    continue
+                if should_stop():
+                    self._checkpoint(cycle, current)
+                    return "stopped"
+                _append(self.journal, {"event": "start", "key": key, "hash": child.content_hash(),
+                                       "pid": os.getpid()})
+                out = runner.execute(child)
+                rec = {"event": "end", "key": key, "seed_index": self.si, "cycle": cycle, "member": member,
+                       "hash": child.content_hash(), "parent": current.content_hash(),
+                       "mutation": f"{gen.description} | {mut.description}",
+                       "retries": gen.retries + mut.retries, "finding": None, "score": None,
+                       "components": {}, "verdict": "pass", "pid": os.getpid()}
+                timings = {"mutation": t_mutate, "isolation": 0.0}
+                t_store = time.perf_counter()
+                if out.status == OK:
+                    ex = out.execution
+                    timings.update(ex.timings)
+                    timings["isolation"] = max(out.wall_time - ex.wall_time, 0.0)
+                    rec.update(termination=ex.termination.value, frames=ex.trace.n_frames,
+                               wall_time=round(ex.wall_time, 4))
+                    if ex.misbehaviors:
+                        m = ex.misbehaviors[0]
+                        t_store = time.perf_counter()
+                        rel = self._save_finding(child, list(ex.misbehaviors), key, ex.trace, ex.termination.value)
+                        rec.update(verdict=f"{m.oracle}/{m.kind}", finding=rel)
                     else:
-                        current = random.Random(f"{cfg.seed}/{self.si}/{cycle}/select").choice(population)[1]
-                self._checkpoint(cycle + 1, current)
-            return "done"
-        finally:
-            runner.close()
+                        from drivefuzz.quality import score_trace
+
+                        t0 = time.perf_counter()
+                        q = score_trace(ex.trace, cfg.quality)
+                        timings["quality"] = time.perf_counter() - t0
+                        rec.update(score=q.score, components=q.as_dict())
+                        population.append((q.score, child))
+                        t_store = time.perf_counter()
+                else:  # the simulator crashed or hung, or a plugin raised: a finding of its own kind
+                    m = Misbehavior(oracle=out.status, kind=out.error_type or out.status, frame=-1, time=0.0,
+                                    position=(0.0, 0.0), details={"detail": out.detail})
+                    rel = self._save_finding(child, [m], key, None, out.status,
+                                             {"error": {"status": out.status, "type": out.error_type,
+                                                        "detail": out.detail, "traceback": out.traceback}})
+                    rec.update(termination=out.status, frames=0, wall_time=round(out.wall_time, 4),
+                               verdict=f"{m.oracle}/{m.kind}", finding=rel)
+                timings["storage"] = time.perf_counter() - t_store
+                rec["timings"] = {k: round(v, 6) for k, v in timings.items()}
+                _append(self.journal, rec)
+                done[key] = rec
+                on_record(rec)
+                if rec["finding"] and not cfg.continue_after_finding:
+                    return "done"
+            if population:
+                if cfg.feedback:
+                    current = min(population, key=lambda p: p[0])[1]
+                else:
+                    current = random.Random(f"{cfg.seed}/{self.si}/{cycle}/select").choice(population)[1]
+            self._checkpoint(cycle + 1, current)
+        return "done"
+
+
+_HOSTS: dict[int, Any] = {}  # one simulation host per thread of this process, kept between jobs
+
+
+def _host_for_this_thread(timeout_s: float):
+    """The calling thread's simulation host (started lazily; a Dask worker reuses it for every job)."""
+    import atexit
+    import threading
+
+    from drivefuzz.simhost import SimHost
+
+    tid = threading.get_ident()
+    host = _HOSTS.get(tid)
+    if host is None:
+        if not _HOSTS:
+            atexit.register(lambda: [h.close() for h in _HOSTS.values()])
+        host = _HOSTS[tid] = SimHost()
+    host.timeout_s = timeout_s
+    return host
 
 
 class _Runner:
@@ -253,11 +272,7 @@ class _Runner:
 
     def __init__(self, cfg):
         self.cfg = cfg
-        self.host = None
-        if cfg.isolate:
-            from drivefuzz.simhost import SimHost
-
-            self.host = SimHost(timeout_s=cfg.exec_timeout_s)
+        self.host = _host_for_this_thread(cfg.exec_timeout_s) if cfg.isolate else None
 
     def execute(self, scenario):
         if self.host is not None:
@@ -273,10 +288,6 @@ class _Runner:
             return Outcome(PLUGIN_ERROR, detail=str(exc), error_type=type(exc.__cause__ or exc).__name__,
                            wall_time=time.monotonic() - t0)
         return Outcome(OK, execution=ex, wall_time=time.monotonic() - t0)
-
-    def close(self) -> None:
-        if self.host is not None:
-            self.host.close()
 
 
 def run_seed_job(out: str, seed_index: int) -> dict[str, Any]:

@@ -94,6 +94,7 @@ class SimHost:
     def __init__(self, timeout_s: float | None = 300.0):
         self.timeout_s = timeout_s
         self.proc: subprocess.Popen | None = None
+        self._path = ""
         self.starts = 0
 
     def __enter__(self) -> "SimHost":
@@ -102,10 +103,14 @@ class SimHost:
     def __exit__(self, *exc) -> None:
         self.close()
 
+    @staticmethod
+    def _pythonpath() -> str:
+        return os.pathsep.join(p for p in sys.path if p)
+
     def _start(self) -> None:
         env = dict(os.environ)
         # plugins importable in the parent (installed, or on a test's sys.path) must be importable here too
-        env["PYTHONPATH"] = os.pathsep.join(p for p in sys.path if p)
+        env["PYTHONPATH"] = self._path = self._pythonpath()
         self.proc = subprocess.Popen([sys.executable, "-m", "drivefuzz.simhost"], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, env=env, close_fds=True)
         self.starts += 1
@@ -134,8 +139,8 @@ class SimHost:
 
     def execute(self, scenario, oracle_settings: dict[str, Any] | None = None) -> Outcome:
         """Run ``scenario`` with the oracles of ``oracle_settings`` (OracleSettings.settings) in the child."""
-        if self.proc is None or self.proc.poll() is not None:
-            self._kill()
+        if self.proc is None or self.proc.poll() is not None or self._path != self._pythonpath():
+            self._kill()  # dead, or the parent's import path changed (a plugin was just made importable)
             self._start()
         t0 = time.monotonic()
         request = ("execute", scenario.model_dump(mode="json"), oracle_settings or {})

@@ -1,0 +1,99 @@
+"""`drivefuzz fuzz` killed (SIGKILL) or interrupted (Ctrl-C) mid-campaign, then `--resume`d: nothing lost or repeated."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+
+import pytest
+
+from drivefuzz.scenario import SimOptions
+from drivefuzz.sumofiles import write_scenario
+
+from conftest import ROOT, TOWN
+
+pytestmark = pytest.mark.timeout(240)
+ARGS = ["--cycles", "3", "--population", "3", "--continue-after-finding", "--ads-option", "fault=speeding", "--seed", "3"]
+
+
+def _cli(*args, **kw) -> subprocess.Popen:
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    return subprocess.Popen([sys.executable, "-m", "drivefuzz.cli", *args], env=env, start_new_session=True,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
+
+
+def _ends(out) -> list[dict]:
+    path = out / "jobs" / "000" / "journal.jsonl"
+    if not path.exists():
+        return []
+    recs = [json.loads(line) for line in path.read_text().splitlines() if line.endswith("}")]
+    return [r for r in recs if r["event"] == "end"]
+
+
+def _wait_for(out, n: int, proc: subprocess.Popen) -> None:
+    t_end = time.monotonic() + 120
+    while len(_ends(out)) < n:
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < t_end
+        time.sleep(0.02)
+
+
+@pytest.fixture
+def seeds(tmp_path, town_scenario):
+    folder = tmp_path / "seeds"
+    write_scenario(town_scenario.model_copy(update={"sim": SimOptions(time_limit=25.0)}), folder / "000")
+    return folder
+
+
+def _reference(tmp_path, seeds):
+    ref = tmp_path / "ref"
+    p = _cli("fuzz", str(TOWN), "--seeds", str(seeds), "-o", str(ref), *ARGS)
+    assert p.wait(120) == 1, p.communicate()
+    return ref
+
+
+def _same_as_reference(out, ref) -> None:
+    got, want = _ends(out), _ends(ref)
+    assert [r["key"] for r in got] == [r["key"] for r in want]  # no execution repeated or skipped
+    assert [(r["hash"], r["verdict"]) for r in got] == [(r["hash"], r["verdict"]) for r in want]
+    assert sorted(p.name for p in (out / "findings").iterdir()) == sorted(p.name for p in (ref / "findings").iterdir())
+    rows = sqlite3.connect(out / "index.sqlite").execute("SELECT COUNT(*), COUNT(DISTINCT key) FROM executions").fetchone()
+    assert rows == (9, 9)
+
+
+def test_sigkill_then_resume_equals_an_uninterrupted_campaign(tmp_path, seeds):
+    out = tmp_path / "out"
+    p = _cli("fuzz", str(TOWN), "--seeds", str(seeds), "-o", str(out), *ARGS)
+    _wait_for(out, 3, p)
+    os.killpg(p.pid, signal.SIGKILL)  # the campaign and its simulation host, mid-execution
+    p.wait()
+    killed_at = len(_ends(out))
+    assert 3 <= killed_at < 9
+    r = _cli("fuzz", "--resume", str(out))
+    stdout, stderr = r.communicate(timeout=120)
+    assert r.returncode == 1, stderr
+    assert "9 executions" in stdout and "finding(s)" in stdout
+    _same_as_reference(out, _reference(tmp_path, seeds))
+
+
+def test_ctrl_c_stops_cleanly_and_resume_finishes(tmp_path, seeds):
+    out = tmp_path / "out"
+    p = _cli("fuzz", str(TOWN), "--seeds", str(seeds), "-o", str(out), *ARGS)
+    _wait_for(out, 2, p)
+    p.send_signal(signal.SIGINT)
+    stdout, stderr = p.communicate(timeout=60)
+    assert "stopped; continue with: drivefuzz fuzz --resume" in stderr, stderr
+    assert "Traceback" not in stderr
+    stopped_at = len(_ends(out))
+    assert stopped_at < 9 and (out / "jobs" / "000" / "checkpoint.json").exists()
+    # everything journalled is indexed and every finding is a complete directory
+    assert sqlite3.connect(out / "index.sqlite").execute("SELECT COUNT(*) FROM executions").fetchone()[0] == stopped_at
+    assert all((f / "verdict.json").exists() for f in (out / "findings").iterdir())
+    r = _cli("fuzz", "--resume", str(out))
+    r.communicate(timeout=120)
+    _same_as_reference(out, _reference(tmp_path, seeds))
