@@ -169,7 +169,7 @@ def seed(network, count, out, rng_seed, no_verify):
                            log=lambda s: click.echo(f"  {s}", err=True))
     if not seeds:
         raise InvalidConfig(network, None, "no mission on this network passed the dry run",
-                            "a network with connected passenger roads of 80-400 m routes")
+                            "a network with connected roads that passenger cars may drive")
     for i, sc in enumerate(seeds):
         write_scenario(sc, out / f"{i:03d}")
     click.echo(f"wrote {len(seeds)} seed(s) to {out}")

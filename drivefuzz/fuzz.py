@@ -282,6 +282,10 @@ def run_on_dask(client, work: list[tuple[Campaign, list[int]]], max_running: int
     """
     from distributed import wait
 
+    threads = {w.get("nthreads", 1) for w in client.scheduler_info().get("workers", {}).values()}
+    if any(not c.cfg.isolate for c, _ in work) and max(threads, default=1) > 1:
+        raise InvalidConfig("--no-isolation", None, "Dask workers with several threads would share one libsumo "
+                            "simulation", "workers started with --nthreads 1, or keep isolation on")
     queue = list(work)
     active: dict[Any, tuple[Campaign, int]] = {}
     running: list[Campaign] = []

@@ -13,6 +13,18 @@ navigation type. Every draw respects:
 - temporal constraint: speeds at most ``max_vehicle_speed`` / ``max_pedestrian_speed``
   (20 mph and 6 mph by default).
 
+Linear vehicles (the entropy strategy's reckless drivers, which ignore the ego)
+are placed where they will meet it, timed with a simple profile of how the
+reference ADS drives the empty route (accelerate, cruise below the limit, slow
+for junction turns): *rear* ones on the ego's lane behind it, no further back
+than the distance from which their constant speed still catches the
+accelerating ego; *cross* ones on another approach to a junction of the
+ego's route whose passage crosses or merges into the ego's, placed so that they
+reach the conflict point as the ego's body passes it; the rest ahead on the
+route. Linear pedestrians jaywalk across the road from the sidewalk. On roads
+without sidewalks pedestrians use the edge of a shared lane, and on single-lane
+roads a maneuver actor brakes hard in front of the ego instead of cutting in.
+
 An infeasible draw is retried (up to ``max_retries``); the retries are counted.
 Every operation returns a one-line description of what it did.
 """
@@ -24,7 +36,10 @@ import random
 from dataclasses import dataclass
 from typing import Literal
 
+import numpy as np
+
 from pydantic import BaseModel, ConfigDict, Field
+from shapely.geometry import LineString, Point
 
 from drivefuzz.roadmap import PASSENGER, PEDESTRIAN, RoadMap
 from drivefuzz.scenario import (
@@ -55,6 +70,18 @@ class MutationConfig(BaseModel):
     max_puddles: int = Field(default=4, ge=0)
     puddle_probability: float = Field(default=0.25, ge=0.0, le=1.0)
     max_retries: int = Field(default=50, ge=1)
+    #: Linear vehicles (entropy): share placed behind the ego to rear-end it, and share sent across a junction
+    #: on the ego's route timed to meet it there (side impact); the rest go ahead of the ego on its route.
+    entropy_linear_share: float = Field(default=0.75, ge=0.0, le=1.0, description="entropy: linear (else immobile)")
+    linear_rear_share: float = Field(default=0.35, ge=0.0, le=1.0)
+    linear_cross_share: float = Field(default=0.45, ge=0.0, le=1.0)
+    conflict_range: float = Field(default=160.0, gt=0.0, description="[m] along the route: junctions where linear "
+                                  "vehicles are timed to cross the ego's path")
+    #: The ego's expected motion, used only to time linear actors: acceleration and share of the speed limit.
+    ego_accel: float = Field(default=2.0, gt=0.0, description="[m/s^2]")
+    ego_decel: float = Field(default=1.2, gt=0.0, description="[m/s^2]")
+    ego_lat_accel: float = Field(default=1.5, gt=0.0, description="[m/s^2] in junction turns (mean curvature)")
+    ego_speed_share: float = Field(default=0.94, gt=0.0, le=1.5)
     #: Probabilistic scheduling of strategies: weights per strategy (used when strategy == "mix").
     mix: dict[str, float] = Field(default_factory=lambda: {s: 1.0 for s in STRATEGIES})
 
@@ -81,6 +108,9 @@ class Mutator:
         self.rmap = rmap
         self.cfg = config or MutationConfig()
         self._route_cache: dict[tuple, tuple[str, ...]] = {}
+        self._conflict_cache: dict[tuple, list] = {}
+        self._profile_cache: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+        self._walkable_cache: dict[tuple, bool] = {}
 
     # ---------------------------------------------------------------- helpers
     def _route(self, sc: Scenario) -> tuple[str, ...]:
@@ -106,8 +136,9 @@ class Mutator:
         if i >= len(route):
             return None
         edge = self.rmap.edge(route[i])
-        if vclass == PEDESTRIAN:
-            lanes = [l for l in edge.getLanes() if l.allows(PEDESTRIAN) and not l.allows(PASSENGER)]
+        if vclass == PEDESTRIAN:  # a sidewalk; on roads without one, the edge of a lane walkers may use
+            lanes = ([l for l in edge.getLanes() if l.allows(PEDESTRIAN) and not l.allows(PASSENGER)]
+                     or [l for l in edge.getLanes()[:1] if l.allows(PEDESTRIAN)])
         else:
             lanes = [l for l in edge.getLanes() if l.allows(PASSENGER)]
         if not lanes:
@@ -141,6 +172,18 @@ class Mutator:
         options = route[spot.route_index:]
         return rng.choice(options[-2:]) if len(options) > 1 else options[0]
 
+    def _walkable(self, sc: Scenario) -> bool:
+        """Whether pedestrians can be placed along the ego's route at all."""
+        key = (sc.mission.start_edge, sc.mission.goal_edge)
+        if key not in self._walkable_cache:
+            self._walkable_cache[key] = any(l.allows(PEDESTRIAN) for e in self._route(sc)
+                                            for l in self.rmap.edge(e).getLanes())
+        return self._walkable_cache[key]
+
+    def _kind(self, sc: Scenario, rng: random.Random) -> ActorKind:
+        kind = rng.choice(list(ActorKind))
+        return kind if kind is ActorKind.VEHICLE or self._walkable(sc) else ActorKind.VEHICLE
+
     # --------------------------------------------------------------- generate
     def generate(self, sc: Scenario, strategy: str, rng: random.Random) -> Mutation:
         """Add one new actor or puddle (a puddle also with ``puddle_probability`` under ``all``)."""
@@ -152,14 +195,15 @@ class Mutator:
         if len(sc.actors) >= self.cfg.max_actors:
             return Mutation(sc, f"no actor added (limit of {self.cfg.max_actors} reached)")
         if strategy == "congestion":
-            return self.add_actor(sc, rng, rng.choice(list(ActorKind)), NavType.AUTOPILOT)
+            return self.add_actor(sc, rng, self._kind(sc, rng), NavType.AUTOPILOT)
         if strategy == "entropy":
-            return self.add_actor(sc, rng, rng.choice(list(ActorKind)), rng.choice([NavType.LINEAR, NavType.IMMOBILE]))
+            nav = NavType.LINEAR if rng.random() < self.cfg.entropy_linear_share else NavType.IMMOBILE
+            return self.add_actor(sc, rng, self._kind(sc, rng), nav)
         if strategy == "maneuver":
             return self.add_actor(sc, rng, ActorKind.VEHICLE, NavType.MANEUVER)
         if strategy == "all":
             nav = rng.choice([NavType.AUTOPILOT, NavType.LINEAR, NavType.IMMOBILE, NavType.MANEUVER])
-            kind = ActorKind.VEHICLE if nav is NavType.MANEUVER else rng.choice(list(ActorKind))
+            kind = ActorKind.VEHICLE if nav is NavType.MANEUVER else self._kind(sc, rng)
             return self.add_actor(sc, rng, kind, nav)
         raise ValueError(f"unknown strategy {strategy!r}")
 
@@ -167,37 +211,61 @@ class Mutator:
         cfg = self.cfg
         vclass = PEDESTRIAN if kind is ActorKind.PEDESTRIAN else PASSENGER
         vmax = cfg.max_pedestrian_speed if kind is ActorKind.PEDESTRIAN else cfg.max_vehicle_speed
+        linear_vehicle = nav is NavType.LINEAR and kind is ActorKind.VEHICLE
         for attempt in range(cfg.max_retries):
-            if nav is NavType.LINEAR and kind is ActorKind.VEHICLE and rng.random() < 0.5:
-                dist = -rng.uniform(cfg.min_range, cfg.behind_range)  # a rear-ender from behind
-            else:
-                dist = rng.uniform(cfg.min_range, cfg.max_range)
-            spot = self._spot_along(sc, rng, dist, vclass)
-            if spot is None or not self._separated(sc, spot.x, spot.y):
-                continue
             speed = 0.0 if nav is NavType.IMMOBILE else round(rng.uniform(0.3 * vmax, vmax), 2)
             aid = self._new_id(sc, "p" if kind is ActorKind.PEDESTRIAN else "v")
-            fields = dict(id=aid, kind=kind, nav=nav, start_lane=spot.lane, start_pos=spot.pos, speed=speed)
             extra = ""
+            if linear_vehicle:
+                u = rng.random()
+                mode = ("rear" if u < cfg.linear_rear_share else
+                        "cross" if u < cfg.linear_rear_share + cfg.linear_cross_share else "ahead")
+                if mode != "ahead":
+                    speed = round(rng.uniform(0.5 * vmax, vmax), 2)
+                    placed = self._rear_place(sc, rng, speed) if mode == "rear" else self._cross_place(sc, rng, speed)
+                    if placed is None:
+                        continue
+                    lane, pos, speed, dest, extra = placed
+                    x, y, _ = self.rmap.geom(lane).position(pos)
+                    if not self._separated(sc, x, y):
+                        continue
+                    try:
+                        actor = Actor(id=aid, kind=kind, nav=nav, start_lane=lane, start_pos=pos, speed=speed,
+                                      dest_edge=dest)
+                    except ValueError:
+                        continue
+                    return Mutation(sc.model_copy(update={"actors": sc.actors + (actor,)}),
+                                    f"add linear vehicle {aid} on {lane} @ {pos:.1f} m, {speed:.1f} m/s{extra}",
+                                    attempt)
+            spot = self._spot_along(sc, rng, rng.uniform(cfg.min_range, cfg.max_range), vclass)
+            if spot is None or not self._separated(sc, spot.x, spot.y):
+                continue
+            fields = dict(id=aid, kind=kind, nav=nav, start_lane=spot.lane, start_pos=spot.pos, speed=speed)
             if kind is ActorKind.PEDESTRIAN:
-                if nav is NavType.LINEAR:  # jaywalk across the road, perpendicular to it
-                    side = rng.choice((-1.0, 1.0))
-                    across = rng.uniform(10.0, 16.0)
+                if nav is NavType.LINEAR:  # jaywalk: straight across the road, perpendicular to it
+                    side = self._road_side(spot.lane)
+                    across = self._road_width(spot.lane) + rng.uniform(1.0, 4.0)
                     fields["dest_xy"] = (round(spot.x - side * math.sin(spot.heading) * across, 2),
                                          round(spot.y + side * math.cos(spot.heading) * across, 2))
+                    extra = ", across the road"
                 elif nav is NavType.AUTOPILOT:
                     fields["dest_edge"] = self._dest_edge(sc, spot, rng)
             elif nav is not NavType.IMMOBILE:
                 fields["dest_edge"] = self._dest_edge(sc, spot, rng)
             if nav is NavType.MANEUVER:
                 lanes = [l for l in self.rmap.lane(spot.lane).getEdge().getLanes() if l.allows(PASSENGER)]
-                if len(lanes) < 2:
-                    continue
-                idx = self.rmap.lane(spot.lane).getIndex()
-                toward = ManeuverAction.LANE_LEFT if idx == lanes[0].getIndex() else ManeuverAction.LANE_RIGHT
-                t_lc = round(rng.uniform(0.5, 6.0), 2)
-                fields["maneuvers"] = (Maneuver(time=t_lc, action=toward, value=round(rng.uniform(1.0, 3.0), 2)),)
-                extra = f", {toward.value} at {t_lc} s"
+                t_m = round(rng.uniform(0.5, 6.0), 2)
+                if len(lanes) >= 2:  # cut in: change towards the other lanes
+                    idx = self.rmap.lane(spot.lane).getIndex()
+                    toward = ManeuverAction.LANE_LEFT if idx == lanes[0].getIndex() else ManeuverAction.LANE_RIGHT
+                    fields["maneuvers"] = (Maneuver(time=t_m, action=toward, value=round(rng.uniform(1.0, 3.0), 2)),)
+                    extra = f", {toward.value} at {t_m} s"
+                else:  # a single lane: brake hard in front of the ego, then drive on
+                    slow = round(rng.uniform(0.0, 0.3) * speed, 2)
+                    t_go = round(t_m + rng.uniform(1.0, 4.0), 2)
+                    fields["maneuvers"] = (Maneuver(time=t_m, action=ManeuverAction.SPEED, value=slow),
+                                           Maneuver(time=t_go, action=ManeuverAction.SPEED, value=speed))
+                    extra = f", slows to {slow:.1f} m/s at {t_m} s until {t_go} s"
             try:
                 actor = Actor(**fields)
             except ValueError:
@@ -206,6 +274,215 @@ class Mutator:
             return Mutation(new, f"add {nav.value} {kind.value} {aid} on {spot.lane} @ {spot.pos:.1f} m, "
                                  f"{speed:.1f} m/s{extra}", attempt)
         return Mutation(sc, f"no feasible {nav.value} {kind.value} after {cfg.max_retries} retries", cfg.max_retries)
+
+    # ---------------------------------------------- linear actors (entropy)
+    def _road_side(self, lane_id: str) -> float:
+        """+1 when the rest of the road lies to the left of a walker's lane (a right-hand sidewalk, or the
+        rightmost lane of a road without sidewalks), else -1."""
+        lane = self.rmap.lane(lane_id)
+        road = [l.getIndex() for l in lane.getEdge().getLanes() if l.allows(PASSENGER) and l.getID() != lane_id]
+        return 1.0 if not road or lane.getIndex() < min(road) else -1.0
+
+    def _road_width(self, lane_id: str) -> float:
+        """[m] across every lane of ``lane_id``'s edge except ``lane_id`` itself, plus half of it."""
+        lane = self.rmap.lane(lane_id)
+        return sum(l.getWidth() for l in lane.getEdge().getLanes() if l.getID() != lane_id) + lane.getWidth() / 2
+
+    def _ego_profile(self, sc: Scenario) -> tuple[np.ndarray, np.ndarray]:
+        """The ego's expected (distance [m] from its start, time [s]) along its route, at 1 m steps.
+
+        A speed cap per metre (``ego_speed_share`` of the limit; in junctions also ``sqrt(ego_lat_accel /
+        curvature)``), then a forward pass accelerating at ``ego_accel`` and a backward pass braking at
+        ``ego_decel``: how the reference ADS drives an empty road. Used only to time linear actors."""
+        m = sc.mission
+        key = (m.start_lane, m.start_pos, m.goal_edge, m.start_speed)
+        if key in self._profile_cache:
+            return self._profile_cache[key]
+        cfg, rmap, route = self.cfg, self.rmap, self._route(sc)
+        caps: list[np.ndarray] = []
+        lane = m.start_lane
+        index = rmap.lane(lane).getIndex()
+        for i, e in enumerate(route):
+            length = rmap.edge(e).getLength() - (m.start_pos if i == 0 else 0.0)
+            caps.append(np.full(max(int(length), 1), cfg.ego_speed_share * rmap.edge(e).getSpeed()))
+            if i + 1 < len(route):
+                conns = rmap.connections(e, route[i + 1])
+                if not conns:
+                    continue
+                fl, _tl, via = min(conns, key=lambda c: abs(rmap.lane(c[0]).getIndex() - index))
+                chain = self._internal_chain(via)
+                length = sum(rmap.geom(lid).length for lid in chain)
+                pts = np.vstack([rmap.geom(fl).pts[-2:]] + [rmap.geom(lid).pts for lid in chain]
+                                + [rmap.geom(_tl).pts[:2]])
+                heading = np.unwrap(np.arctan2(*np.diff(pts, axis=0).T[::-1]))
+                k = abs(float(heading[-1] - heading[0])) / max(length, 1.0)  # mean curvature [1/m]
+                v = cfg.ego_speed_share * rmap.geom(chain[0]).speed if chain else caps[-1][-1]
+                if k > 1e-4:
+                    v = min(v, math.sqrt(cfg.ego_lat_accel / k))
+                caps.append(np.full(max(int(round(length)), 1), v))
+        cap = np.maximum(np.concatenate(caps), 0.5)
+        v = np.empty(len(cap) + 1)
+        v[0] = min(m.start_speed, cap[0])
+        for j in range(len(cap)):  # forward: accelerate
+            v[j + 1] = min(cap[j], math.sqrt(v[j] ** 2 + 2 * cfg.ego_accel))
+        for j in range(len(cap) - 1, -1, -1):  # backward: brake ahead of slow parts
+            v[j] = min(v[j], math.sqrt(v[j + 1] ** 2 + 2 * cfg.ego_decel))
+        dt = 2.0 / np.maximum(v[:-1] + v[1:], 1e-3)  # 1 m at the mean speed
+        prof = (np.arange(len(cap) + 1, dtype=float), np.concatenate([[0.0], np.cumsum(dt)]))
+        self._profile_cache[key] = prof
+        return prof
+
+    def _ego_eta(self, sc: Scenario, dist: float) -> float:
+        """[s] until the ego's front bumper is expected ``dist`` metres along its route."""
+        s, t = self._ego_profile(sc)
+        return float(np.interp(dist, s, t))
+
+    def _ego_progress(self, sc: Scenario, t: float) -> float:
+        """[m] the ego's front bumper is expected to have covered at time ``t`` [s]."""
+        s, ts = self._ego_profile(sc)
+        return float(np.interp(t, ts, s))
+
+    def _via_length(self, from_lane: str, to_lane: str) -> float:
+        """[m] through the junction from the end of ``from_lane`` to the start of ``to_lane`` (0 if direct)."""
+        for c in self.rmap.lane(from_lane).getOutgoing():
+            if c.getToLane().getID() == to_lane and c.getViaLaneID():
+                return sum(self.rmap.lane(v).getLength() for v in self._internal_chain(c.getViaLaneID()))
+        return 0.0
+
+    def _upstream(self, lane_id: str, pos: float, back: float,
+                  rng: random.Random) -> tuple[str, float, float] | None:
+        """(lane, pos, driving distance [m]) about ``back`` metres of driving upstream of (lane_id, pos), through
+        incoming passenger lanes and the junctions between them; at least ``back`` (an actor never stands
+        inside a junction). None when the road ends first."""
+        covered = 0.0
+        for _ in range(4):
+            if pos - back >= 1.0:
+                new_pos = round(min(pos - back, self.rmap.lane(lane_id).getLength() - 0.5), 2)
+                return lane_id, new_pos, covered + pos - new_pos
+            ins = [l for l in self.rmap.lane(lane_id).getIncoming()
+                   if l.getEdge().getFunction() == "" and l.allows(PASSENGER)]
+            if not ins:
+                return None
+            lane = rng.choice(ins)
+            via = self._via_length(lane.getID(), lane_id)
+            covered += pos + via
+            back = max(back - pos - via, 0.0)
+            lane_id, pos = lane.getID(), lane.getLength()
+        return None
+
+    def _rear_place(self, sc: Scenario, rng: random.Random, speed: float):
+        """Behind the ego on its own lane, close enough that at ``speed`` it catches the accelerating ego."""
+        ego_len = 4.6  # [m] the reference car's body; only sharpens the timing
+        # largest front-to-front gap [m] from which the actor still reaches the ego's rear bumper within 30 s
+        g_max = max(speed * t - self._ego_progress(sc, t) + ego_len for t in (0.25 * k for k in range(1, 121)))
+        g_min = self.cfg.min_separation + ego_len / 2
+        if g_max < g_min:
+            return None
+        gap = rng.uniform(g_min, min(g_max, g_min + self.cfg.behind_range))
+        m = sc.mission
+        placed = self._upstream(m.start_lane, m.start_pos, gap, rng)
+        if placed is None or placed[2] > g_max:
+            return None
+        lane, pos, gap = placed
+        dest = self._route(sc)[-1]
+        actor_route = self.rmap.route(self.rmap.lane(lane).getEdge().getID(), dest)
+        if not actor_route or m.start_edge not in actor_route:
+            return None
+        return lane, pos, speed, dest, f", {gap:.1f} m behind the ego"
+
+    def _internal_chain(self, via: str) -> list[str]:
+        """Every internal lane of a junction passage that starts with ``via`` (also past internal stop lines)."""
+        chain: list[str] = []
+        while via and via not in chain:
+            chain.append(via)
+            nxt = ""
+            for c in self.rmap.lane(via).getOutgoing():
+                to = c.getToLane()
+                nxt = to.getID() if to.getEdge().getFunction() == "internal" else (c.getViaLaneID() or "")
+                break
+            via = nxt
+        return chain
+
+    def _passage(self, from_lane: str, to_lane: str, via: str) -> LineString:
+        """The centre line through a junction: the internal lanes of a connection, then ``to_lane``'s first metres."""
+        pts: list = [tuple(self.rmap.geom(from_lane).pts[-1])]
+        for lid in self._internal_chain(via):
+            pts.extend(map(tuple, self.rmap.geom(lid).pts))
+        g = self.rmap.geom(to_lane)
+        pts.extend(map(tuple, g.pts[g.cum < 15.0]))
+        pts.append(self.rmap.geom(to_lane).position(min(15.0, g.length))[:2])
+        return LineString(pts)
+
+    def _conflicts(self, sc: Scenario) -> list[tuple[int, float, str, str, float, str]]:
+        """Ways to cross the ego's path at the junctions of its route within ``conflict_range``:
+        (route index of the junction's incoming edge, ego distance [m] from its start to the conflict point,
+        actor lane entering the junction, actor destination edge, actor distance [m] from that lane's end to
+        the conflict point, junction id). Cached per mission."""
+        m = sc.mission
+        key = (m.start_lane, m.start_pos, m.goal_edge)
+        if key in self._conflict_cache:
+            return self._conflict_cache[key]
+        rmap, route = self.rmap, self._route(sc)
+        out = []
+        s = -m.start_pos
+        ego_index = self.rmap.lane(m.start_lane).getIndex()
+        for i, e in enumerate(route[:-1]):
+            s += rmap.edge(e).getLength()
+            if s > self.cfg.conflict_range:
+                break
+            conns = rmap.connections(e, route[i + 1])
+            if not conns:
+                continue
+            fl, tl, via = min(conns, key=lambda c: abs(rmap.lane(c[0]).getIndex() - ego_index))
+            ego_line = self._passage(fl, tl, via)
+            ego_zone = ego_line.buffer(2.0)  # closer centre lines than this: the bodies meet
+            node = rmap.edge(e).getToNode()
+            for inc in node.getIncoming():
+                if inc.getID() == e or inc.getFunction() != "":
+                    continue
+                for lane in inc.getLanes():
+                    if not lane.allows(PASSENGER):
+                        continue
+                    for c in lane.getOutgoing():
+                        to = c.getToLane()
+                        if to.getEdge().getFunction() != "" or to.getEdge().getToNode() is inc.getFromNode():
+                            continue
+                        line = self._passage(lane.getID(), to.getID(), c.getViaLaneID() or "")
+                        hit = line.intersection(ego_zone)
+                        if hit.is_empty:
+                            continue
+                        d_actor = min(line.project(Point(xy)) for xy in _coords(hit))
+                        pt = line.interpolate(d_actor)
+                        out.append((i, s + ego_line.project(pt), lane.getID(), to.getEdge().getID(), d_actor,
+                                    node.getID()))
+        self._conflict_cache[key] = out
+        return out
+
+    def _cross_place(self, sc: Scenario, rng: random.Random, speed: float):
+        """On another approach to a junction of the ego's route, timed to reach the point where its path
+        crosses (or merges into) the ego's just as the ego gets there: a side impact if nobody yields."""
+        options = self._conflicts(sc)
+        if not options:
+            return None
+        i, s_c, lane_id, dest, d_c, node = rng.choice(options)
+        # the ego's front reaches the conflict point at about t_c (the profile runs a little early, and a
+        # reference ADS that sees the actor in its path first simply stops): arrive while the ego's body is there
+        t_c = self._ego_eta(sc, s_c)
+        t_meet = t_c + rng.uniform(0.0, 1.2)
+        rmap = self.rmap
+        lane_len = rmap.lane(lane_id).getLength()
+        back = speed * t_meet - d_c
+        placed = self._upstream(lane_id, lane_len, back, rng) if back > 0 else None
+        if placed is None:  # not enough road upstream: start as far back as possible, slower
+            placed = (lane_id, 1.0, lane_len - 1.0)
+        speed = round((placed[2] + d_c) / max(t_meet, 0.1), 2)  # the junctions on the way make it longer
+        if not 0.3 * self.cfg.max_vehicle_speed <= speed <= self.cfg.max_vehicle_speed:
+            return None
+        lane, pos, _ = placed
+        actor_route = rmap.route(rmap.lane(lane).getEdge().getID(), dest)
+        if not actor_route or rmap.lane(lane_id).getEdge().getID() not in actor_route:
+            return None
+        return lane, pos, speed, dest, f", crosses the ego's path at {node} at ~{t_meet:.1f} s"
 
     def add_puddle(self, sc: Scenario, rng: random.Random) -> Mutation:
         cfg = self.cfg
@@ -304,3 +581,12 @@ class Mutator:
         else:
             value = round(rng.uniform(0.0, 100.0), 1)
         return w.model_copy(update={name: value}), f"weather {name} {getattr(w, name)} -> {value}"
+
+
+def _coords(geom) -> list[tuple[float, float]]:
+    """Every vertex of a shapely geometry (collections and multi-parts included)."""
+    if hasattr(geom, "geoms"):
+        return [xy for g in geom.geoms for xy in _coords(g)]
+    if geom.geom_type == "Polygon":
+        return list(geom.exterior.coords)
+    return list(geom.coords)

@@ -19,6 +19,8 @@ from drivefuzz.scenario import AdsSpec, Mission, Scenario, SimOptions
 #: Route length [m] a seed mission aims for.
 MIN_ROUTE_M = 80.0
 MAX_ROUTE_M = 400.0
+#: Shortest edge [m] a mission starts or ends on.
+MIN_EDGE_M = 25.0
 
 
 def time_limit_for(rmap: RoadMap, route: tuple[str, ...], length_m: float) -> float:
@@ -27,30 +29,61 @@ def time_limit_for(rmap: RoadMap, route: tuple[str, ...], length_m: float) -> fl
     return round(30.0 + length_m / 5.0 + 45.0 * signals, 1)
 
 
-def random_missions(rmap: RoadMap, rng: random.Random, network: str) -> Iterator[Scenario]:
-    """Endless random candidate seeds (unverified)."""
-    edges = [e for e in rmap.edge_ids(PASSENGER) if rmap.edge(e).getLength() >= 25.0]
+def doubles_back(rmap: RoadMap, route: tuple[str, ...]) -> bool:
+    """Whether ``route`` drives a road in both directions (a U-turn at a dead end, or a loop back)."""
+    seen: set[tuple[str, str]] = set()
+    for e in route:
+        edge = rmap.edge(e)
+        a, b = edge.getFromNode().getID(), edge.getToNode().getID()
+        if (b, a) in seen:
+            return True
+        seen.add((a, b))
+    return False
+
+
+def random_missions(rmap: RoadMap, rng: random.Random, network: str, max_draws: int = 5000) -> Iterator[Scenario]:
+    """Random candidate seeds (unverified), until ``max_draws`` draws in a row gave none.
+
+    Works on any network a user brings: only normal edges with a passenger lane of at least
+    ``MIN_EDGE_M`` are used as start and goal (no sidewalks, bus or bike lanes, junction lanes),
+    the ego starts on a lane that continues along its route, and routes that drive a road in
+    both directions (U-turns at dead ends) are left out. Networks too small for routes of
+    ``MIN_ROUTE_M`` get routes of at least half their longest possible route instead.
+    """
+    edges = [e for e in rmap.edge_ids(PASSENGER)
+             if rmap.edge(e).getLength() >= MIN_EDGE_M and not rmap.edge(e).getID().startswith(":")]
     if not edges:
         return
-    while True:
+    min_route = MIN_ROUTE_M
+    misses = 0
+    longest = 0.0
+    while misses < max_draws:
+        misses += 1
+        if misses == max_draws // 2 and longest < MIN_ROUTE_M:
+            min_route = max(longest / 2.0, 2 * MIN_EDGE_M)  # a small network: shorter missions
         start = rng.choice(edges)
         goal = rng.choice(edges)
         route = rmap.route(start, goal)
-        if route is None or len(route) < 2:
+        if route is None or len(route) < 2 or doubles_back(rmap, route):
             continue
         start_len = rmap.edge(start).getLength()
         goal_len = rmap.edge(goal).getLength()
         start_pos = round(rng.uniform(5.0, max(5.0, min(start_len * 0.5, start_len - 15.0))), 1)
         goal_pos = round(rng.uniform(min(12.0, goal_len / 2), max(12.0, goal_len - 12.0)), 1)
+        goal_pos = min(goal_pos, round(goal_len - 1.0, 1))
         length = rmap.route_length(route, start_pos, goal_pos)
-        if not MIN_ROUTE_M <= length <= MAX_ROUTE_M:
+        longest = max(longest, length)
+        if not min_route <= length <= MAX_ROUTE_M:
             continue
         start_lanes = [l.getID() for l in rmap.edge(start).getLanes()
                        if l.allows(PASSENGER) and any(c.getTo().getID() == route[1] for c in l.getOutgoing())]
-        lane = rng.choice(start_lanes) if start_lanes else rmap.drive_lane(start)
+        if not start_lanes:
+            continue
+        misses = 0
         yield Scenario(
             network=network,
-            mission=Mission(start_lane=lane, start_pos=start_pos, goal_edge=goal, goal_pos=goal_pos),
+            mission=Mission(start_lane=rng.choice(start_lanes), start_pos=start_pos, goal_edge=goal,
+                            goal_pos=goal_pos),
             ads=AdsSpec(name="ego"),
             seed=rng.randrange(2**31),
             sim=SimOptions(time_limit=time_limit_for(rmap, route, length)),
