@@ -188,8 +188,7 @@ def test_collision_static_obstacle_and_margin():
     f.actor_speed, f.actor_length, f.actor_width = np.array([0.0]), np.array([4.6]), np.array([1.8])
     assert [m.kind for m in gap.on_frame(f)] == ["vehicle"]  # 0.55 m apart < 1 m
     o.reset(ctx)
-    f.x = 0.0
-    assert o.on_frame(f) == ()  # no contact with the default margin
+    assert o.on_frame(f) == ()  # the same frame: no contact with the default margin
 
 
 # ------------------------------------------------------------------- speeding
@@ -207,6 +206,8 @@ def test_speeding_tolerance_and_normal_run_are_silent():
     ex = run(scenario("A0B0_1", 10.0, "B0C0", 60.0, time_limit=40.0, fault="speeding"),
              SpeedingOracle({"tolerance": 5.0}))
     assert ex.misbehaviors == ()
+    excess = ex.trace["speed"] - ex.trace["speed_limit"]
+    assert 2.0 < np.nanmax(excess[ex.trace["t"] > 3.0]) < 5.0  # it did speed, within the tolerance
     ex = run(scenario(**NORMAL, time_limit=90.0), SpeedingOracle())
     assert ex.termination is Termination.GOAL_REACHED
     assert ex.misbehaviors == ()
@@ -409,11 +410,15 @@ def test_lane_invasion_off_road_and_tolerance():
     assert o.on_frame(f) == ()
     f.y = -5.5  # right side 0.05 m onto the sidewalk: within the tolerance
     assert o.on_frame(f) == ()
+    f.y = -5.8  # 0.35 m onto it: beyond
+    assert [m.kind for m in o.on_frame(f)] == ["sidewalk"]
+    f.y = -4.8
+    assert o.on_frame(f) == ()
     f.y = -10.0  # beyond the sidewalk
     assert [m.kind for m in o.on_frame(f)] == ["off_road"]
     f.y = -4.8
     assert o.on_frame(f) == ()
-    f.y = -3.0  # 0.05 m over the dashed line into A0B0_2: legal
+    f.y = -3.0  # 1.15 m over the dashed line into A0B0_2: legal
     assert o.on_frame(f) == ()
     f.y = 0.3  # left side 1.25 m into B0A0_2
     assert [m.kind for m in o.on_frame(f)] == ["opposite_lane"]
