@@ -18,7 +18,7 @@ import abc
 import importlib
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
-from typing import Any, ClassVar, Mapping
+from typing import Any, ClassVar, Mapping, NamedTuple
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
@@ -48,9 +48,9 @@ class EgoState:
     wheelbase: float  # [m]
 
 
-@dataclass(frozen=True, slots=True)
-class ObjectState:
-    """One other road user (ground truth)."""
+class ObjectState(NamedTuple):
+    """One other road user (ground truth). A NamedTuple: immutable, and three times cheaper to build than a
+    frozen dataclass, which matters at 20 objects x 1200 steps per execution."""
 
     id: str
     kind: str  # "vehicle" | "pedestrian"
@@ -128,7 +128,7 @@ class ADS(abc.ABC):
             err = exc.errors()[0]
             loc = ".".join(str(p) for p in err["loc"])
             fields = ", ".join(self.Options.model_fields) or "none"
-            raise InvalidConfig(f"--ads-option", f"{self.name or type(self).__name__}.{loc}", err["msg"],
+            raise InvalidConfig("--ads-option", f"{self.name or type(self).__name__}.{loc}", err["msg"],
                                 f"options: {fields}") from None
 
     @abc.abstractmethod

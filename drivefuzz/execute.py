@@ -25,10 +25,18 @@ Every step, in this fixed order (frame k is the world after SUMO step k)::
 The ego is a SUMO vehicle with speed mode 0 and lane-change mode 0 that is
 moved every step, so other traffic sees and yields to it; SUMO's own collision
 detection is only a cross-check (it misses lateral and off-lane contact).
+Linear and immobile pedestrians are placed by the executor (``person.moveToXY``)
+every step; their recorded speed is the walked one. An exception in plugin code
+(ADS or oracle) leaves :func:`execute` as a :class:`~drivefuzz.errors.PluginError`
+naming the plugin. ``Execution.timings``: seconds per stage, ``setup``, ``sumo``
+(steps 9-10), ``world`` (1), ``record`` (2), ``oracles`` (3), ``observe`` (5),
+``ads`` (6), ``physics`` (7-8); ``tools/bench_exec.py`` prints them.
 """
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import math
 import os
 import random
@@ -36,36 +44,35 @@ import shutil
 import tempfile
 import time
 from dataclasses import dataclass, field
+from itertools import chain
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 import drivefuzz
-from drivefuzz.ads import (
-    ADS,
-    OBSERVATION_RADIUS,
-    EgoState,
-    MissionInfo,
-    Observation,
-    ObjectState,
-    TrafficLightState,
-    load_ads,
-)
-from drivefuzz.errors import SimulationError
-from drivefuzz.oracle import Frame, LaneLink, Misbehavior, Obstacle, Oracle, RunContext, Termination
+from drivefuzz.ads import ADS, EgoState, MissionInfo, Observation, TrafficLightState, load_ads
+from drivefuzz.errors import PluginError, SimulationError
+from drivefuzz.oracle import Frame, LaneLink, Misbehavior, Oracle, RunContext, Termination
 from drivefuzz.physics import VehicleParams, VehiclePhysics, place_state
 from drivefuzz.roadmap import load_roadmap
-from drivefuzz.scenario import ActorKind, ManeuverAction, NavType, Scenario
+from drivefuzz.scenario import Scenario
 from drivefuzz.sumofiles import ADDITIONAL, EGO_ID, ROUTES, write_scenario
-from drivefuzz.trace import EGO_FLOAT_FIELDS, Recorder, Trace
+from drivefuzz.trace import Recorder, Trace
+from drivefuzz.world import (
+    ActorDriver,
+    Actors,
+    Puddles,
+    static_obstacles,
+    sun_glare,
+    surface_friction,
+    tls_link_table,
+)
 
 #: Distance [m] from the ego centre to the goal point that counts as arrived (the paper's 2 m).
 GOAL_RADIUS = 2.0
 #: Speed [m/s] below which an ego at the goal counts as stopped there.
 GOAL_STOP_SPEED = 0.5
-#: POI/polygon types the collision oracle treats as solid (a user's polygon file may use them).
-OBSTACLE_TYPES = ("building", "obstacle", "barrier", "pole", "fence", "wall", "drivefuzz.obstacle")
 
 
 @dataclass(frozen=True)
@@ -82,36 +89,6 @@ class Execution:
     @property
     def failed(self) -> bool:
         return bool(self.misbehaviors)
-
-
-def sun_glare(weather, heading: float) -> bool:
-    """The sun is low (< 20 deg) and within 30 deg of the driving direction."""
-    if not -5.0 < weather.sun_altitude_deg < 20.0:
-        return False
-    compass = (90.0 - math.degrees(heading)) % 360.0
-    diff = abs((weather.sun_azimuth_deg - compass + 180.0) % 360.0 - 180.0)
-    return diff < 30.0
-
-
-def surface_friction(weather) -> float:
-    """Friction of the dry road (1.0) reduced by wetness and rain (at most by 30 %)."""
-    return 1.0 - 0.3 * max(weather.wetness, weather.rain) / 100.0
-
-
-class _Puddles:
-    """Point-in-rotated-rectangle test for the axles (cheap: a few puddles, two points a step)."""
-
-    def __init__(self, puddles):
-        self.items = [(p.x, p.y, math.cos(p.rotation), math.sin(p.rotation), p.length / 2, p.width / 2, p.friction)
-                      for p in puddles]
-
-    def friction_at(self, x: float, y: float, default: float) -> float:
-        mu = default
-        for cx, cy, c, s, hl, hw, f in self.items:
-            dx, dy = x - cx, y - cy
-            if abs(c * dx + s * dy) <= hl and abs(-s * dx + c * dy) <= hw:
-                mu = min(mu, f)
-        return mu
 
 
 def _sumo_args(scenario: Scenario, folder: Path, net: Path, gui: bool) -> list[str]:
@@ -132,99 +109,6 @@ def _sumo_args(scenario: Scenario, folder: Path, net: Path, gui: bool) -> list[s
     if gui:
         args += ["--start", "--quit-on-end", "--delay", "50"]
     return args
-
-
-class _ActorDriver:
-    """Applies the behaviour carried in the scenario's params to SUMO actors each step."""
-
-    def __init__(self, sim, scenario: Scenario):
-        self.sim = sim
-        self.spec = {a.id: a for a in scenario.actors}
-        self.started: set[str] = set()
-        self.maneuver_next: dict[str, int] = {}
-        self.walkers: dict[str, list[float]] = {}  # linear pedestrians: [x, y, ux, uy, remaining]
-        self.dt = scenario.sim.step_length
-
-    def on_depart(self, actor_id: str, t: float) -> None:
-        a = self.spec.get(actor_id)
-        if a is None or actor_id in self.started:
-            return
-        self.started.add(actor_id)
-        sim = self.sim
-        if a.kind is ActorKind.VEHICLE:
-            if a.nav is NavType.LINEAR:
-                sim.vehicle.setSpeedMode(actor_id, 0)
-                sim.vehicle.setLaneChangeMode(actor_id, 0)
-                sim.vehicle.setSpeed(actor_id, a.speed)
-            elif a.nav is NavType.AUTOPILOT:
-                sim.vehicle.setMaxSpeed(actor_id, max(a.speed, 0.1))
-            elif a.nav is NavType.MANEUVER:
-                sim.vehicle.setMaxSpeed(actor_id, max(a.speed, 0.1))
-                sim.vehicle.setLaneChangeMode(actor_id, 512)
-                self.maneuver_next[actor_id] = 0
-        else:
-            if a.nav is NavType.LINEAR and a.dest_xy is not None:
-                x, y = sim.person.getPosition(actor_id)
-                dx, dy = a.dest_xy[0] - x, a.dest_xy[1] - y
-                d = math.hypot(dx, dy) or 1.0
-                self.walkers[actor_id] = [x, y, dx / d, dy / d, d]
-            elif a.nav is NavType.AUTOPILOT:
-                sim.person.setSpeed(actor_id, max(a.speed, 0.05))
-
-    def step(self, t: float, alive_vehicles: set[str], alive_persons: set[str]) -> None:
-        sim = self.sim
-        for vid, k in list(self.maneuver_next.items()):
-            a = self.spec[vid]
-            if vid not in alive_vehicles:
-                continue
-            while k < len(a.maneuvers) and t - a.depart >= a.maneuvers[k].time:
-                m = a.maneuvers[k]
-                if m.action is ManeuverAction.SPEED:
-                    sim.vehicle.setSpeed(vid, m.value)
-                else:
-                    idx = sim.vehicle.getLaneIndex(vid) + (1 if m.action is ManeuverAction.LANE_LEFT else -1)
-                    lane = sim.vehicle.getLaneID(vid)
-                    n_lanes = sim.edge.getLaneNumber(sim.lane.getEdgeID(lane)) if lane else 0
-                    if 0 <= idx < n_lanes:
-                        sim.vehicle.changeLane(vid, idx, max(m.value, self.dt))
-                k += 1
-            self.maneuver_next[vid] = k
-        for pid, w in list(self.walkers.items()):
-            if pid not in alive_persons:
-                del self.walkers[pid]
-                continue
-            step = min(self.spec[pid].speed * self.dt, w[4])
-            w[0] += w[2] * step
-            w[1] += w[3] * step
-            w[4] -= step
-            angle = (90.0 - math.degrees(math.atan2(w[3], w[2]))) % 360.0
-            sim.person.moveToXY(pid, "", w[0], w[1], angle, 2)
-
-
-def _tls_link_table(sim) -> dict[str, list[tuple[str, int, str, str]]]:
-    """lane id -> [(tls, link index, to lane, via)] for every signalised vehicle link."""
-    table: dict[str, list[tuple[str, int, str, str]]] = {}
-    for tls in sim.trafficlight.getIDList():
-        for idx, links in enumerate(sim.trafficlight.getControlledLinks(tls)):
-            for in_lane, out_lane, via in links:
-                table.setdefault(in_lane, []).append((tls, idx, out_lane, via))
-    return table
-
-
-def _static_obstacles(sim) -> list[Obstacle]:
-    from shapely.geometry import Point, Polygon
-
-    out = []
-    for pid in sim.polygon.getIDList():
-        if sim.polygon.getType(pid) in OBSTACLE_TYPES:
-            shape = sim.polygon.getShape(pid)
-            if len(shape) >= 3:
-                out.append(Obstacle(pid, Polygon(shape)))
-    for pid in sim.poi.getIDList():
-        if sim.poi.getType(pid) in OBSTACLE_TYPES:
-            x, y = sim.poi.getPosition(pid)
-            out.append(Obstacle(pid, Point(x, y).buffer(0.3)))
-    return out
 
 
 def execute(
@@ -254,7 +138,7 @@ def execute(
     else:
         folder = Path(workdir)
     try:
-        write_scenario(scenario, folder)
+        write_scenario(scenario, folder, durable=False)
         if gui:
             import traci as sim  # the GUI needs a traci connection; same API as libsumo
         else:
@@ -264,7 +148,7 @@ def execute(
         except Exception as exc:  # TraCIException cannot be pickled: re-raise plainly
             raise SimulationError(f"SUMO failed to start on {folder}: {type(exc).__name__}: {exc}") from None
         try:
-            return _run(sim, scenario, rmap, ads, list(oracles), params, stop_on_misbehavior, wall0)
+            result = _run(sim, scenario, rmap, ads, list(oracles), params, stop_on_misbehavior, wall0)
         finally:
             try:
                 sim.close()
@@ -273,22 +157,41 @@ def execute(
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
+    return dataclasses.replace(result, wall_time=time.perf_counter() - wall0)
+
+
+def _plugin_error(what: str, name: str, exc: BaseException, where: str) -> PluginError:
+    """A plugin's own exception as a PluginError that names the plugin (raise it ``from exc``)."""
+    return PluginError(f"{what} {name!r} raised {type(exc).__name__} {where}: {exc}")
+
+
+@contextlib.contextmanager
+def _blame(what: str, name: str, where: str):
+    """:func:`_plugin_error` around a block (the per-frame calls use try/except: it is cheaper)."""
+    try:
+        yield
+    except Exception as exc:
+        raise _plugin_error(what, name, exc, where) from exc
 
 
 def _run(sim, scenario: Scenario, rmap, ads: ADS, oracles: list[Oracle], params: VehicleParams,
          stop_on_misbehavior: bool, wall0: float) -> Execution:
     dt = scenario.sim.step_length
     mission = scenario.mission
-    route = list(rmap.route(mission.start_edge, mission.goal_edge))
+    planned = rmap.route(mission.start_edge, mission.goal_edge)
+    route = list(planned)  # SUMO's route for the ego, kept current from the edge it is on
     gx, gy, _ = rmap.geom(rmap.drive_lane(mission.goal_edge)).position(mission.goal_pos)
     # the goal is reached on any passenger lane of the goal edge
     goal_pts = [rmap.geom(l.getID()).position(mission.goal_pos)[:2]
                 for l in rmap.edge(mission.goal_edge).getLanes() if l.allows("passenger")]
-    half_len = params.length / 2.0
+    half_len, half_wid = params.length / 2.0, params.width / 2.0
+    to_front_axle, to_rear_axle = params.centre_to_front_axle, params.centre_to_rear_axle
     rng = random.Random(scenario.seed)
     weather = scenario.weather
-    timings = dict.fromkeys(("sumo", "physics", "ads", "oracles", "record", "world"), 0.0)
+    timings = dict.fromkeys(("setup", "sumo", "world", "record", "oracles", "observe", "ads", "physics"), 0.0)
     perf = time.perf_counter
+    ads_name = ads.name or type(ads).__name__
+    oracle_names = [o.name or type(o).__name__ for o in oracles]
 
     # -- setup: insert everything, then take the ego over ---------------------------------
     t0 = perf()
@@ -300,17 +203,15 @@ def _run(sim, scenario: Scenario, rmap, ads: ADS, oracles: list[Oracle], params:
         raise SimulationError(f"SUMO could not insert the ego on {mission.start_lane} at {mission.start_pos} m "
                               "(blocked by an actor?)")
     timings["sumo"] += perf() - t0
-    driver = _ActorDriver(sim, scenario)
-    for vid in sim.vehicle.getIDList():
-        driver.on_depart(vid, 0.0)
-    for pid in sim.person.getIDList():
-        driver.on_depart(pid, 0.0)
+    driver = ActorDriver(sim, scenario, rmap)  # starts the actors' behaviours in the first frame
     if ads.sumo_driven:
         # SUMO drives: hold the ego at the goal instead of letting it arrive and vanish.
         goal_len = rmap.edge(mission.goal_edge).getLength()
         sim.vehicle.setStop(EGO_ID, mission.goal_edge, pos=min(mission.goal_pos + params.length / 2, goal_len),
                             laneIndex=rmap.lane(rmap.drive_lane(mission.goal_edge)).getIndex(), duration=1e6)
-        for key, value in ads.vtype_settings().items():  # e.g. accel -> vehicle.setAccel
+        with _blame("ADS", ads_name, "at reset"):
+            settings = ads.vtype_settings()
+        for key, value in settings.items():  # e.g. accel -> vehicle.setAccel
             getattr(sim.vehicle, "set" + key[0].upper() + key[1:])(EGO_ID, value)
     else:
         sim.vehicle.setSpeedMode(EGO_ID, 0)
@@ -319,142 +220,149 @@ def _run(sim, scenario: Scenario, rmap, ads: ADS, oracles: list[Oracle], params:
     heading = math.radians(90.0 - sim.vehicle.getAngle(EGO_ID))
     cx, cy = fx - half_len * math.cos(heading), fy - half_len * math.sin(heading)
     physics = VehiclePhysics(params, place_state(cx, cy, heading, mission.start_speed, params))
-    ads.reset(MissionInfo(mission.start_lane, mission.start_pos, mission.goal_edge, mission.goal_pos, (gx, gy),
-                          tuple(route), dt, scenario.seed), rmap)
-    ctx = RunContext(scenario, rmap, tuple(route), (gx, gy), params.length, params.width, dt,
-                     _static_obstacles(sim))
-    for oracle in oracles:
-        oracle.reset(ctx)
-    tls_links = _tls_link_table(sim)
-    puddles = _Puddles(scenario.puddles)
+    with _blame("ADS", ads_name, "at reset"):
+        ads.reset(MissionInfo(mission.start_lane, mission.start_pos, mission.goal_edge, mission.goal_pos, (gx, gy),
+                              planned, dt, scenario.seed), rmap)
+    ctx = RunContext(scenario, rmap, planned, (gx, gy), params.length, params.width, dt,
+                     static_obstacles(sim))
+    for oracle, name in zip(oracles, oracle_names):
+        with _blame("oracle", name, "at reset"):
+            oracle.reset(ctx)
+    tls_links = tls_link_table(sim)
+    puddles = Puddles(scenario.puddles)
     mu_surface = surface_friction(weather)
     wind_amp = 0.5 * 1.2 * 0.9 * (params.length * 1.5) * (15.0 * weather.wind / 100.0) ** 2  # [N]
     wind_phase = rng.uniform(0.0, 2.0 * math.pi)
     speed_limits: dict[str, float] = {}
+    links_seen: dict[tuple, tuple[LaneLink, ...]] = {}
     recorder = Recorder(int(scenario.sim.time_limit / dt) + 8)
+    actors = Actors(sim, recorder, driver)
     frame = Frame()
     prev_front = (fx, fy)
-    control = None
     misbehaviors: list[Misbehavior] = []
     termination = Termination.TIME_LIMIT
-    actor_sizes: dict[str, tuple[float, float, int]] = {}  # length, width, recorder index
     last_edge = ""
     steer = throttle = brake = 0.0
     time_limit = scenario.sim.time_limit
     start_t = sim.simulation.getTime()
+    route_index = {e: i for i, e in reversed(list(enumerate(route)))}
+    v_get = sim.vehicle
+    timings["setup"] = perf() - wall0 - timings["sumo"]
 
     while True:
         # 1. read the world --------------------------------------------------------------
         t1 = perf()
         t = sim.simulation.getTime() - start_t
-        vids = sim.vehicle.getIDList()
-        if EGO_ID not in vids:
+        vids = v_get.getIDList()
+        try:
+            k_ego = vids.index(EGO_ID)
+        except ValueError:
             termination = Termination.EGO_LOST
             break
+        others = vids[:k_ego] + vids[k_ego + 1:]
         pids = sim.person.getIDList()
-        for vid in sim.simulation.getDepartedIDList():
-            driver.on_depart(vid, t)
-        for pid in sim.simulation.getDepartedPersonIDList():
-            driver.on_depart(pid, t)
+        if (others, pids) != actors.key:  # someone departed or arrived: start what departed
+            for aid in chain(others, pids):
+                driver.on_depart(aid, t)
         if ads.sumo_driven:
-            fx, fy = sim.vehicle.getPosition(EGO_ID)
-            h = math.radians(90.0 - sim.vehicle.getAngle(EGO_ID))
-            v = sim.vehicle.getSpeed(EGO_ID)
+            fx, fy = v_get.getPosition(EGO_ID)
+            h = math.radians(90.0 - v_get.getAngle(EGO_ID))
+            v = v_get.getSpeed(EGO_ID)
             st = physics.state
             yaw_rate = ((h - st.heading + math.pi) % (2 * math.pi) - math.pi) / dt
             ax = (v - st.vx) / dt
             st.x, st.y = fx - half_len * math.cos(h), fy - half_len * math.sin(h)
             st.heading, st.vx, st.vy, st.yaw_rate, st.ax, st.ay = h, v, 0.0, yaw_rate, ax, v * yaw_rate
         state = physics.state
+        ex, ey = state.x, state.y
         ch, sh = math.cos(state.heading), math.sin(state.heading)
-        front = (state.x + half_len * ch, state.y + half_len * sh)
-        lane = sim.vehicle.getLaneID(EGO_ID)
-        edge = sim.vehicle.getRoadID(EGO_ID)
-        lane_pos = sim.vehicle.getLanePosition(EGO_ID) if lane else math.nan
+        front = (ex + half_len * ch, ey + half_len * sh)
+        lane = v_get.getLaneID(EGO_ID)
+        edge = v_get.getRoadID(EGO_ID)
         if lane:
+            lane_pos = v_get.getLanePosition(EGO_ID)
             limit = speed_limits.get(lane)
             if limit is None:
                 limit = speed_limits[lane] = sim.lane.getMaxSpeed(lane)
+            # the centre's offset, square to the lane where the centre is (SUMO reports the front's)
+            lat = rmap.geom(lane).lateral(ex, ey, lane_pos - half_len)
         else:
-            limit = math.nan
+            lane_pos = limit = lat = math.nan
         if edge != last_edge and edge and not edge.startswith(":"):
-            if edge in route:
-                k = route.index(edge)
-                if tuple(sim.vehicle.getRoute(EGO_ID)) != tuple(route[k:]):
-                    try:
-                        sim.vehicle.setRoute(EGO_ID, route[k:])
-                    except Exception:  # noqa: BLE001 - SUMO refuses a route it cannot follow; keep its own
-                        pass
+            k = route_index.get(edge)
+            if k is None:  # off the route (an ADS may plan its own): SUMO's ego goes to the goal from here
+                rest = rmap.route(edge, mission.goal_edge)
+                if rest:
+                    route, k = list(rest), 0
+                    route_index = {e: i for i, e in reversed(list(enumerate(route)))}
+            if k is not None and tuple(v_get.getRoute(EGO_ID)) != tuple(route[k:]):
+                try:
+                    v_get.setRoute(EGO_ID, route[k:])
+                except Exception:  # noqa: BLE001 - SUMO refuses a route it cannot follow; keep its own
+                    pass
             last_edge = edge
-        nxt = sim.vehicle.getNextTLS(EGO_ID)
+        nxt = v_get.getNextTLS(EGO_ID)
         next_tls = (nxt[0][0], nxt[0][1], nxt[0][2], nxt[0][3]) if nxt else None
         links = ()
         if lane in tls_links:
-            states: dict[str, str] = {}
-            lst = []
-            for tls, idx, out_lane, via in tls_links[lane]:
-                s = states.get(tls)
-                if s is None:
-                    s = states[tls] = sim.trafficlight.getRedYellowGreenState(tls)
-                lst.append(LaneLink(tls, idx, out_lane, via, s[idx]))
-            links = tuple(lst)
-        ids, kinds = [], []
-        rows = []
-        for kind, domain, actor_ids in (("vehicle", sim.vehicle, vids), ("pedestrian", sim.person, pids)):
-            for aid in actor_ids:
-                if aid == EGO_ID:
-                    continue
-                info = actor_sizes.get(aid)
-                if info is None:  # sizes are fixed: read them once per actor
-                    length, width = domain.getLength(aid), domain.getWidth(aid)
-                    info = actor_sizes[aid] = (length, width, recorder.actor_index(aid, kind, length, width))
-                px, py = domain.getPosition(aid)
-                h = math.radians(90.0 - domain.getAngle(aid))
-                hl = info[0] / 2.0
-                rows.append((info[2], px - hl * math.cos(h), py - hl * math.sin(h), h, domain.getSpeed(aid),
-                             info[0], info[1]))
-                ids.append(aid)
-                kinds.append(kind)
-        arr = np.asarray(rows, dtype=float).reshape(-1, 7)
+            lane_tls, lane_links = tls_links[lane]
+            key = (lane, tuple(sim.trafficlight.getRedYellowGreenState(tls) for tls in lane_tls))
+            links = links_seen.get(key)
+            if links is None:  # the same lights show the same states again and again
+                states = dict(zip(lane_tls, key[1]))
+                links = links_seen[key] = tuple(LaneLink(tls, idx, out_lane, via, states[tls][idx])
+                                                for tls, idx, out_lane, via in lane_links)
+        ax_, ay_, ah_, av_ = actors.read(others, pids)
+        ids, kinds = actors.ids, actors.kinds
         collisions = tuple((c.collider, c.victim, c.type) for c in sim.simulation.getCollisions()
                            if EGO_ID in (c.collider, c.victim))
-        goal_dist = min(math.hypot(state.x - px, state.y - py) for px, py in goal_pts)
+        goal_dist = min(math.hypot(ex - px, ey - py) for px, py in goal_pts)
         timings["world"] += perf() - t1
 
         # 2. record frame ----------------------------------------------------------------------
         t2 = perf()
-        mu_f = puddles.friction_at(*physics.axle_positions()[0], mu_surface)
-        mu_r = puddles.friction_at(*physics.axle_positions()[1], mu_surface)
-        lat = sim.vehicle.getLateralLanePosition(EGO_ID) if lane else math.nan
+        mu_f = puddles.friction_at(ex + to_front_axle * ch, ey + to_front_axle * sh, mu_surface)
+        mu_r = puddles.friction_at(ex - to_rear_axle * ch, ey - to_rear_axle * sh, mu_surface)
         fidx = recorder.add_frame(
-            [t, state.x, state.y, state.heading, state.speed, state.vx, state.vy, state.ax, state.ay, state.yaw_rate,
+            [t, ex, ey, state.heading, state.speed, state.vx, state.vy, state.ax, state.ay, state.yaw_rate,
              state.road_wheel_angle * params.steering_ratio, state.road_wheel_angle, steer, throttle, brake,
              mu_f, mu_r, limit, next_tls[2] if next_tls else math.nan, lane_pos, goal_dist],
             edge, lane, next_tls[3] if next_tls else "")
-        if len(arr):
-            recorder.add_actors(fidx, arr[:, :5])
+        if ids:
+            recorder.add_actor_columns(fidx, actors.index_list, *actors.lists)
         timings["record"] += perf() - t2
 
         # 3. oracles ----------------------------------------------------------------------------
         t3 = perf()
+        fwd_x, fwd_y, lft_x, lft_y = half_len * ch, half_len * sh, -half_wid * sh, half_wid * ch
         frame.index, frame.t = fidx, t
-        frame.x, frame.y, frame.heading, frame.speed = state.x, state.y, state.heading, state.speed
+        frame.x, frame.y, frame.heading, frame.speed = ex, ey, state.heading, state.speed
         frame.prev_front, frame.front = prev_front, front
-        frame.corners = None
+        # front-right, front-left, rear-left, rear-right, as drivefuzz.geometry.corners
+        frame.corners = np.array(((ex + fwd_x - lft_x, ey + fwd_y - lft_y), (ex + fwd_x + lft_x, ey + fwd_y + lft_y),
+                                  (ex - fwd_x + lft_x, ey - fwd_y + lft_y), (ex - fwd_x - lft_x, ey - fwd_y - lft_y)))
         frame.edge, frame.lane, frame.lane_pos, frame.speed_limit = edge, lane, lane_pos, limit
         frame.lat_offset = lat
-        frame.route_index = route.index(edge) if edge in route else -1
+        frame.route_index = route_index.get(edge, -1)
         frame.goal_dist = goal_dist
         frame.lane_links = links
         frame.next_tls = next_tls
-        frame.ads_done = ads.done()
+        try:
+            frame.ads_done = ads.done()
+        except Exception as exc:
+            raise _plugin_error("ADS", ads_name, exc, f"at frame {fidx}") from exc
         frame.actor_ids, frame.actor_kinds = ids, kinds
-        frame.actor_x, frame.actor_y, frame.actor_heading = arr[:, 1], arr[:, 2], arr[:, 3]
-        frame.actor_speed, frame.actor_length, frame.actor_width = arr[:, 4], arr[:, 5], arr[:, 6]
+        frame.actor_x, frame.actor_y, frame.actor_heading, frame.actor_speed = ax_, ay_, ah_, av_
+        frame.actor_length, frame.actor_width = actors.length, actors.width
         frame.sumo_collisions = collisions
         fired: list[Misbehavior] = []
-        for oracle in oracles:
-            fired.extend(oracle.on_frame(frame))
+        for oracle, name in zip(oracles, oracle_names):
+            try:
+                out = oracle.on_frame(frame)
+            except Exception as exc:
+                raise _plugin_error("oracle", name, exc, f"at frame {fidx}") from exc
+            if out:
+                fired.extend(out)
         timings["oracles"] += perf() - t3
         prev_front = front
 
@@ -473,22 +381,22 @@ def _run(sim, scenario: Scenario, rmap, ads: ADS, oracles: list[Oracle], params:
 
         # 5-6. observation and ADS ------------------------------------------------------------------
         t5 = perf()
-        objects = []
-        for k in range(len(ids)):
-            x, y = arr[k, 1], arr[k, 2]
-            if abs(x - state.x) < OBSERVATION_RADIUS and abs(y - state.y) < OBSERVATION_RADIUS:
-                objects.append(ObjectState(ids[k], kinds[k], x, y, arr[k, 3], arr[k, 4], arr[k, 5], arr[k, 6]))
         obs = Observation(
             t=t,
-            ego=EgoState(state.x, state.y, state.heading, state.speed, state.vx, state.vy, state.yaw_rate,
+            ego=EgoState(ex, ey, state.heading, state.speed, state.vx, state.vy, state.yaw_rate,
                          state.ax, state.road_wheel_angle, params.length, params.width, params.wheelbase),
-            lane=lane, lane_pos=lane_pos, speed_limit=limit, objects=tuple(objects),
+            lane=lane, lane_pos=lane_pos, speed_limit=limit, objects=actors.observed(ex, ey),
             traffic_light=TrafficLightState(*next_tls) if next_tls else None,
             weather=weather, sun_glare=sun_glare(weather, state.heading),
         )
-        control = ads.step(obs)
-        steer, throttle, brake = float(control.steer), float(control.throttle), float(control.brake)
-        timings["ads"] += perf() - t5
+        t6 = perf()
+        timings["observe"] += t6 - t5
+        try:
+            control = ads.step(obs)
+            steer, throttle, brake = float(control.steer), float(control.throttle), float(control.brake)
+        except Exception as exc:
+            raise _plugin_error("ADS", ads_name, exc, f"at frame {fidx}") from exc
+        timings["ads"] += perf() - t6
 
         # 7-8. physics and placement ----------------------------------------------------------------
         if not ads.sumo_driven:
@@ -499,22 +407,27 @@ def _run(sim, scenario: Scenario, rmap, ads: ADS, oracles: list[Oracle], params:
             nx, ny = state.x + half_len * ch, state.y + half_len * sh
             angle = (90.0 - math.degrees(state.heading)) % 360.0
             hint = edge if edge and not edge.startswith(":") else ""
-            sim.vehicle.moveToXY(EGO_ID, hint, -1, nx, ny, angle, 2)
+            v_get.moveToXY(EGO_ID, hint, -1, nx, ny, angle, 2)
             timings["physics"] += perf() - t7
 
         # 9-10. actors and SUMO step ------------------------------------------------------------------
         t9 = perf()
-        driver.step(t, set(vids), set(pids))
+        driver.step(t, vids, pids)
         sim.simulationStep()
         timings["sumo"] += perf() - t9
 
+    t_end = perf()
     trace = recorder.freeze({
         "step_length": dt, "ego_length": params.length, "ego_width": params.width,
         "wheelbase": params.wheelbase, "steering_ratio": params.steering_ratio,
         "scenario_hash": scenario.content_hash(), "termination": termination.value,
-        "goal_xy": [gx, gy], "route": route, "drivefuzz": drivefuzz.__version__,
+        "goal_xy": [gx, gy], "route": list(planned), "drivefuzz": drivefuzz.__version__,
     })
-    for oracle in oracles:
-        misbehaviors.extend(oracle.on_end(trace, termination))
+    timings["record"] += perf() - t_end
+    t_end = perf()
+    for oracle, name in zip(oracles, oracle_names):
+        with _blame("oracle", name, "at the end of the run"):
+            misbehaviors.extend(oracle.on_end(trace, termination))
+    timings["oracles"] += perf() - t_end
     wall = time.perf_counter() - wall0
     return Execution(scenario, trace, termination, tuple(misbehaviors), wall, timings)

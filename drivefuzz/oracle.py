@@ -108,7 +108,7 @@ class Frame:
     speed: float = 0.0
     front: tuple[float, float] = (0.0, 0.0)  # [m] front-bumper centre
     prev_front: tuple[float, float] = (0.0, 0.0)
-    corners: np.ndarray | None = None  # (4, 2) ego footprint
+    corners: np.ndarray | None = None  # (4, 2) [m] ego footprint, order of drivefuzz.geometry.corners
     edge: str = ""
     lane: str = ""  # "" off-road
     lane_pos: float = float("nan")  # [m] of the front bumper

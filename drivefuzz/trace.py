@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import json
 import os
+from itertools import chain
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -170,24 +171,23 @@ def _freeze(arrays: Mapping[str, np.ndarray]) -> dict[str, np.ndarray]:
 
 
 class Recorder:
-    """Fills per-frame arrays during a run; :meth:`freeze` returns the :class:`Trace`.
+    """Collects per-frame values during a run; :meth:`freeze` returns the :class:`Trace`.
 
-    Arrays grow by doubling, so the per-step cost is a few item assignments.
+    A step only appends references (the ego's value list, the actors' column lists): the
+    arrays are built once, at :meth:`freeze`. Between two SUMO steps that is cheaper than
+    writing into numpy arrays, and the caller's lists must simply not be changed afterwards.
     """
 
-    def __init__(self, capacity: int = 1024):
-        self._cap = max(16, int(capacity))
+    def __init__(self, capacity: int = 1024):  # capacity: kept for callers; lists need none
         self._n = 0
-        self._ego = np.full((self._cap, len(EGO_FLOAT_FIELDS)), np.nan)
+        self._ego: list = []  # per frame: values in EGO_FLOAT_FIELDS order
         self._strs: dict[str, list[str]] = {k: [] for k in EGO_STR_FIELDS}
         self._ids: list[str] = []
         self._index: dict[str, int] = {}
         self._kinds: list[str] = []
         self._length: list[float] = []
         self._width: list[float] = []
-        self._acap = 4096
-        self._an = 0
-        self._arows = np.empty((self._acap, 6))  # frame, actor, x, y, heading, speed
+        self._blocks: list[tuple] = []  # (frame, actor indices, x, y, heading, speed), each (k,)
 
     @property
     def n_frames(self) -> int:
@@ -203,14 +203,11 @@ class Recorder:
             self._width.append(float(width))
         return j
 
-    def add_frame(self, ego_values: np.ndarray | list[float], edge: str, lane: str, tls_state: str) -> int:
+    def add_frame(self, ego_values, edge: str, lane: str, tls_state: str) -> int:
         """Append one frame; ``ego_values`` follows :data:`EGO_FLOAT_FIELDS`. Returns the frame index."""
-        if self._n == self._cap:
-            self._cap *= 2
-            grown = np.full((self._cap, len(EGO_FLOAT_FIELDS)), np.nan)
-            grown[: self._n] = self._ego[: self._n]
-            self._ego = grown
-        self._ego[self._n] = ego_values
+        if len(ego_values) != len(EGO_FLOAT_FIELDS):
+            raise ValueError(f"expected {len(EGO_FLOAT_FIELDS)} ego values, got {len(ego_values)}")
+        self._ego.append(ego_values)
         self._strs["edge"].append(edge)
         self._strs["lane"].append(lane)
         self._strs["tls_state"].append(tls_state)
@@ -219,31 +216,34 @@ class Recorder:
 
     def add_actors(self, frame: int, rows: np.ndarray) -> None:
         """Append actor rows ``[actor_index, x, y, heading, speed]`` (shape (k, 5)) for ``frame``."""
-        k = len(rows)
-        if not k:
-            return
-        while self._an + k > self._acap:
-            self._acap *= 2
-            grown = np.empty((self._acap, 6))
-            grown[: self._an] = self._arows[: self._an]
-            self._arows = grown
-        block = self._arows[self._an : self._an + k]
-        block[:, 0] = frame
-        block[:, 1:] = rows
-        self._an += k
+        rows = np.asarray(rows, dtype=float).reshape(-1, 5)
+        if len(rows):
+            self._blocks.append((frame, rows[:, 0], rows[:, 1], rows[:, 2], rows[:, 3], rows[:, 4]))
+
+    def add_actor_columns(self, frame: int, index, x, y, heading, speed) -> None:
+        """Append one frame's actors as columns (recorder actor index, x, y, heading, speed), each of length k."""
+        if len(index):
+            self._blocks.append((frame, index, x, y, heading, speed))
 
     def freeze(self, meta: Mapping[str, Any] | None = None) -> Trace:
         n = self._n
-        ego = {name: self._ego[:n, i].copy() for i, name in enumerate(EGO_FLOAT_FIELDS)}
-        for name, values in self._strs.items():
-            ego[name] = np.array(values, dtype=object)
-        rows = self._arows[: self._an]
-        frame = rows[:, 0].astype(np.int32)
+        values = np.array(self._ego, dtype=float).reshape(n, len(EGO_FLOAT_FIELDS))
+        ego = {name: values[:, i].copy() for i, name in enumerate(EGO_FLOAT_FIELDS)}
+        for name, strs in self._strs.items():
+            ego[name] = np.array(strs, dtype=object)
+        blocks = self._blocks
+        if blocks:
+            sizes = [len(b[1]) for b in blocks]
+            total = sum(sizes)
+            frame = np.repeat(np.array([b[0] for b in blocks], dtype=np.int32), sizes)
+            cols = [np.fromiter(chain.from_iterable(b[c] for b in blocks), float, total) for c in range(1, 6)]
+        else:
+            frame, cols = np.empty(0, dtype=np.int32), [np.empty(0) for _ in range(5)]
         actors = ActorSamples(
             ids=tuple(self._ids), kinds=tuple(self._kinds),
             length=np.asarray(self._length, dtype=float), width=np.asarray(self._width, dtype=float),
-            frame=frame, actor=rows[:, 1].astype(np.int32),
-            x=rows[:, 2].copy(), y=rows[:, 3].copy(), heading=rows[:, 4].copy(), speed=rows[:, 5].copy(),
+            frame=frame, actor=cols[0].astype(np.int32),
+            x=cols[1], y=cols[2], heading=cols[3], speed=cols[4],
             offsets=_offsets(frame, n),
         )
         return Trace(ego=_freeze(ego), actors=actors, meta=dict(meta or {}))

@@ -20,8 +20,8 @@ from drivefuzz.ads import ADS, Control, MissionInfo, Observation
 from drivefuzz.physics import VehicleParams
 
 from ego.actuation import PurePursuit, SpeedController
-from ego.perception import Perception
-from ego.planning import build_path, idm_accel, stop_accel
+from ego.perception import HEADING, LENGTH, PED, SPEED, WIDTH, X, Y, Perception
+from ego.planning import CELL, build_path, idm_accel, lawful_route, stop_accel
 from ego.sensing import Sensors, SensorSpec
 
 FAULTS = ("none", "speeding", "no_traffic_lights", "no_control", "steer_left")
@@ -43,11 +43,15 @@ class ReferenceADS(ADS):
         self.rmap = roadmap
         self.sensors = Sensors(SensorSpec(range_m=self.options.sensor_range), mission.seed)
         self.perception = Perception()
-        self.path, self.edge_s = build_path(roadmap, mission.route, mission.start_lane, mission.start_pos,
+        # drivefuzz's route, unless it needs a lane the car cannot reach from its start lane lawfully
+        self.route = lawful_route(roadmap, tuple(mission.route), mission.start_lane)
+        self.path, self.edge_s = build_path(roadmap, self.route, mission.start_lane, mission.start_pos,
                                             mission.goal_edge, mission.goal_pos)
+        self._curvature = self.path.curvature.tolist()  # [1/m] a slice of it is read every step
         _, self.s_goal, _ = self.path.locate(*mission.goal_xy, hint=0, window=len(self.path.pts))
         self.path_idx = 0
         self.params = params
+        self._rear_off = params.centre_to_rear_axle
         self.tracker = PurePursuit(params.wheelbase, params.max_road_wheel_angle)
         self.speed = SpeedController(max_decel=params.max_brake_decel)
         self._done = False
@@ -64,10 +68,10 @@ class ReferenceADS(ADS):
         world = self.perception.update(obs, det)
         ego = obs.ego
         ch, sh = math.cos(ego.heading), math.sin(ego.heading)
-        self.path_idx, s_c, _lat = self.path.locate(ego.x, ego.y, self.path_idx)
+        self.path_idx, s_c, lat_c = self.path.locate(ego.x, ego.y, self.path_idx)
         self.s_center = s_c
         half = ego.length / 2.0
-        rear_off = self.params.centre_to_rear_axle
+        rear_off = self._rear_off
         rx, ry = ego.x - rear_off * ch, ego.y - rear_off * sh
         v = ego.speed
 
@@ -80,26 +84,38 @@ class ReferenceADS(ADS):
             v0 = min(v0, self.options.cruise_speed)
         i0 = self.path_idx
         i1 = min(i0 + int(max(v * 3.0, 15.0)), len(self.path.pts) - 1)
-        kmax = float(self.path.curvature[i0:i1 + 1].max()) if i1 > i0 else 0.0
+        kmax = max(self._curvature[i0:i1 + 1]) if i1 > i0 else 0.0
         if kmax > 1e-4:
             v0 = min(v0, math.sqrt(self.options.max_lat_accel / kmax))
         accel = idm_accel(v, v0, math.inf, 0.0)
 
-        # obstacles in the path: leaders and pedestrians (predicted 1.5 s ahead)
+        # obstacles in the path: leaders and pedestrians (pedestrians also predicted 1.5 s ahead).
+        # An object in the corridor (at most ~4 m to the side) is within a grid cell of the path,
+        # and at most ~90 m (plus the car's own offset from the path) from the car.
+        path = self.path
+        lo, hi = path.window(self.path_idx, 120)
+        reach = 90.0 + abs(lat_c)
+        ex, ey = ego.x, ego.y
         for tr in world.tracks:
-            for horizon in (0.0, 1.5) if tr.kind == "pedestrian" else (0.0,):
-                px = tr.x + tr.speed * math.cos(tr.heading) * horizon
-                py = tr.y + tr.speed * math.sin(tr.heading) * horizon
-                _, s_o, lat_o = self.path.locate(px, py, self.path_idx, window=120)
+            ped = tr[PED]
+            corridor = 1.3 + tr[WIDTH] / 2 + (0.8 if ped else 0.0)
+            for horizon in (0.0, 1.5) if ped else (0.0,):
+                px = tr[X] + tr[SPEED] * math.cos(tr[HEADING]) * horizon if horizon else tr[X]
+                py = tr[Y] + tr[SPEED] * math.sin(tr[HEADING]) * horizon if horizon else tr[Y]
+                if abs(px - ex) > reach or abs(py - ey) > reach:
+                    continue
+                if corridor < CELL - 1.0:
+                    hit = path.locate_near(px, py, lo, hi)
+                    if hit is None:
+                        continue
+                    s_o, lat_o = hit
+                else:  # a very wide object: the corridor reaches beyond a grid cell
+                    _, s_o, lat_o = path.locate(px, py, self.path_idx, window=120)
                 ahead = s_o - s_c
-                if ahead <= 0 or ahead > 80:
+                if ahead <= 0 or ahead > 80 or abs(lat_o) > corridor:
                     continue
-                corridor = 1.3 + tr.width / 2 + (0.8 if tr.kind == "pedestrian" else 0.0)
-                if abs(lat_o) > corridor:
-                    continue
-                gap = ahead - half - tr.length / 2
-                rel = math.cos(tr.heading - ego.heading)
-                dv = v - tr.speed * max(rel, 0.0)
+                gap = ahead - half - tr[LENGTH] / 2
+                dv = v - tr[SPEED] * max(math.cos(tr[HEADING] - ego.heading), 0.0)
                 accel = min(accel, idm_accel(v, v0, gap, dv))
 
         # traffic light

@@ -9,23 +9,14 @@ from drivefuzz.ads import Observation
 
 from ego.sensing import Detections
 
-
-@dataclass
-class Track:
-    id: str
-    kind: str
-    x: float
-    y: float
-    heading: float
-    speed: float
-    length: float
-    width: float
-    last_seen: float  # [s]
+#: Indices into a track, a :data:`ego.sensing.Detected` tuple: id, is pedestrian, x [m], y [m],
+#: heading [rad ENU], speed [m/s], length [m], width [m].
+ID, PED, X, Y, HEADING, SPEED, LENGTH, WIDTH = range(8)
 
 
 @dataclass
 class World:
-    tracks: list[Track]
+    tracks: list[tuple]  # see ID ... WIDTH
     tl_state: str | None  # last seen state of the next light ('' unknown)
     tl_distance: float  # [m] estimated distance to its stop line
     speed_limit: float  # [m/s]
@@ -36,24 +27,31 @@ class Perception:
 
     def __init__(self, hold_s: float = 0.5):
         self.hold_s = hold_s
-        self.tracks: dict[str, Track] = {}
+        self.tracks: dict[str, tuple] = {}
+        self.seen: dict[str, float] = {}  # [s] when each track was last detected
         self.tl: tuple[str, str, float, float] | None = None  # (tls id, state, distance, odometer at sighting)
         self.odometer = 0.0
         self.last_t = 0.0
         self.speed_limit = 13.89
 
     def update(self, obs: Observation, det: Detections) -> World:
-        dt = max(obs.t - self.last_t, 0.0)
-        self.last_t = obs.t
+        t = obs.t
+        dt = max(t - self.last_t, 0.0)
+        self.last_t = t
         self.odometer += obs.ego.speed * dt
-        for o in det.objects:
-            self.tracks[o.id] = Track(o.id, o.kind, o.x, o.y, o.heading, o.speed, o.length, o.width, obs.t)
-        for tid in [k for k, tr in self.tracks.items() if obs.t - tr.last_seen > self.hold_s]:
-            del self.tracks[tid]
-        for tr in self.tracks.values():  # dead-reckon tracks that were not seen this frame
-            if tr.last_seen < obs.t:
-                tr.x += tr.speed * math.cos(tr.heading) * dt
-                tr.y += tr.speed * math.sin(tr.heading) * dt
+        tracks, seen = self.tracks, self.seen
+        for d in det.objects:
+            tracks[d[ID]] = d
+            seen[d[ID]] = t
+        if len(tracks) > len(det.objects):
+            for tid, tr in list(tracks.items()):
+                if seen[tid] < t:
+                    if t - seen[tid] > self.hold_s:
+                        del tracks[tid], seen[tid]
+                    else:  # dead-reckon a track that was not seen this frame
+                        v, h = tr[SPEED], tr[HEADING]
+                        tracks[tid] = (tid, tr[PED], tr[X] + v * math.cos(h) * dt, tr[Y] + v * math.sin(h) * dt,
+                                       h, v, tr[LENGTH], tr[WIDTH])
         if det.traffic_light is not None:
             tl = det.traffic_light
             self.tl = (tl.tls_id, tl.state, tl.distance, self.odometer)
@@ -65,4 +63,4 @@ class Perception:
             tl_dist = self.tl[2] - (self.odometer - self.tl[3])
         if obs.lane and not obs.lane.startswith(":") and math.isfinite(obs.speed_limit):
             self.speed_limit = obs.speed_limit
-        return World(list(self.tracks.values()), tl_state, tl_dist, self.speed_limit)
+        return World(list(tracks.values()), tl_state, tl_dist, self.speed_limit)

@@ -2,10 +2,6 @@
 
 from __future__ import annotations
 
-import json
-import shutil
-
-import pytest
 from click.testing import CliRunner
 
 from drivefuzz.cli import main

@@ -1,0 +1,242 @@
+"""The world around the ego during an execution: actors' behaviour and poses, puddles, weather, obstacles.
+
+Used only by :mod:`drivefuzz.execute`, which passes in the simulation module
+(libsumo, or traci for ``--gui``); nothing here imports either.
+"""
+
+from __future__ import annotations
+
+import math
+from itertools import chain, compress, repeat
+from typing import Sequence
+
+import numpy as np
+
+from drivefuzz.ads import OBSERVATION_RADIUS, ObjectState
+from drivefuzz.oracle import Obstacle
+from drivefuzz.scenario import ActorKind, ManeuverAction, NavType, Scenario
+from drivefuzz.trace import Recorder
+
+#: POI/polygon types the collision oracle treats as solid (a user's polygon file may use them).
+OBSTACLE_TYPES = ("building", "obstacle", "barrier", "pole", "fence", "wall", "drivefuzz.obstacle")
+
+
+def sun_glare(weather, heading: float) -> bool:
+    """The sun is low (< 20 deg) and within 30 deg of the driving direction."""
+    if not -5.0 < weather.sun_altitude_deg < 20.0:
+        return False
+    compass = (90.0 - math.degrees(heading)) % 360.0
+    diff = abs((weather.sun_azimuth_deg - compass + 180.0) % 360.0 - 180.0)
+    return diff < 30.0
+
+
+def surface_friction(weather) -> float:
+    """Friction of the dry road (1.0) reduced by wetness and rain (at most by 30 %)."""
+    return 1.0 - 0.3 * max(weather.wetness, weather.rain) / 100.0
+
+
+class Puddles:
+    """Point-in-rotated-rectangle test for the axles (cheap: a few puddles, two points a step)."""
+
+    def __init__(self, puddles):
+        self.items = [(p.x, p.y, math.cos(p.rotation), math.sin(p.rotation), p.length / 2, p.width / 2, p.friction)
+                      for p in puddles]
+
+    def friction_at(self, x: float, y: float, default: float) -> float:
+        mu = default
+        for cx, cy, c, s, hl, hw, f in self.items:
+            dx, dy = x - cx, y - cy
+            if abs(c * dx + s * dy) <= hl and abs(-s * dx + c * dy) <= hw:
+                mu = min(mu, f)
+        return mu
+
+
+class ActorDriver:
+    """Applies the behaviour carried in the scenario's params to SUMO actors each step."""
+
+    def __init__(self, sim, scenario: Scenario, rmap):
+        self.sim = sim
+        self.rmap = rmap
+        self.spec = {a.id: a for a in scenario.actors}
+        self.started: set[str] = set()
+        self.maneuver_next: dict[str, int] = {}
+        #: pedestrians the executor moves itself: [x, y, ux, uy, remaining [m], speed of the last step [m/s]]
+        self.walkers: dict[str, list[float]] = {}
+        self.dt = scenario.sim.step_length
+
+    def on_depart(self, actor_id: str, t: float) -> None:
+        a = self.spec.get(actor_id)
+        if a is None or actor_id in self.started:
+            return
+        self.started.add(actor_id)
+        sim = self.sim
+        if a.kind is ActorKind.VEHICLE:
+            if a.nav is NavType.LINEAR:
+                sim.vehicle.setSpeedMode(actor_id, 0)
+                sim.vehicle.setLaneChangeMode(actor_id, 0)
+                sim.vehicle.setSpeed(actor_id, a.speed)
+            elif a.nav is NavType.AUTOPILOT:
+                sim.vehicle.setMaxSpeed(actor_id, max(a.speed, 0.1))
+            elif a.nav is NavType.MANEUVER:
+                sim.vehicle.setMaxSpeed(actor_id, max(a.speed, 0.1))
+                sim.vehicle.setLaneChangeMode(actor_id, 512)
+                self.maneuver_next[actor_id] = 0
+        elif a.nav in (NavType.IMMOBILE, NavType.LINEAR):
+            # SUMO puts a person's stop beside the lane (~3 m off a 2 m sidewalk): stand on the lane instead
+            x, y, h = self.rmap.geom(a.start_lane).position(a.start_pos)
+            # (moved every step: a person moved once leaves its stop and vanishes)
+            ux, uy, d = math.cos(h), math.sin(h), 0.0
+            if a.nav is NavType.LINEAR and a.dest_xy is not None:
+                dx, dy = a.dest_xy[0] - x, a.dest_xy[1] - y
+                d = math.hypot(dx, dy)
+                if d > 0.0:
+                    ux, uy = dx / d, dy / d
+            self.walkers[actor_id] = [x, y, ux, uy, d, 0.0]
+            sim.person.moveToXY(actor_id, "", x, y, (90.0 - math.degrees(math.atan2(uy, ux))) % 360.0, 2)
+        elif a.nav is NavType.AUTOPILOT:
+            sim.person.setSpeed(actor_id, max(a.speed, 0.05))
+
+    def step(self, t: float, alive_vehicles: Sequence[str], alive_persons: Sequence[str]) -> None:
+        sim = self.sim
+        if self.maneuver_next:
+            alive = set(alive_vehicles)
+            for vid, k in list(self.maneuver_next.items()):
+                a = self.spec[vid]
+                if vid not in alive:
+                    continue
+                while k < len(a.maneuvers) and t - a.depart >= a.maneuvers[k].time:
+                    m = a.maneuvers[k]
+                    if m.action is ManeuverAction.SPEED:
+                        sim.vehicle.setSpeed(vid, m.value)
+                    else:
+                        idx = sim.vehicle.getLaneIndex(vid) + (1 if m.action is ManeuverAction.LANE_LEFT else -1)
+                        lane = sim.vehicle.getLaneID(vid)
+                        n_lanes = sim.edge.getLaneNumber(sim.lane.getEdgeID(lane)) if lane else 0
+                        if 0 <= idx < n_lanes:
+                            sim.vehicle.changeLane(vid, idx, max(m.value, self.dt))
+                    k += 1
+                self.maneuver_next[vid] = k
+        if self.walkers:
+            alive = set(alive_persons)
+            for pid, w in list(self.walkers.items()):
+                if pid not in alive:
+                    del self.walkers[pid]
+                    continue
+                step = min(self.spec[pid].speed * self.dt, w[4])
+                w[0] += w[2] * step
+                w[1] += w[3] * step
+                w[4] -= step
+                w[5] = step / self.dt
+                angle = (90.0 - math.degrees(math.atan2(w[3], w[2]))) % 360.0
+                sim.person.moveToXY(pid, "", w[0], w[1], angle, 2)
+
+
+def tls_link_table(sim) -> dict[str, tuple[tuple[str, ...], list[tuple[str, int, str, str]]]]:
+    """lane id -> (its lights, [(tls, link index, to lane, via)]) for every signalised link."""
+    table: dict[str, list[tuple[str, int, str, str]]] = {}
+    for tls in sim.trafficlight.getIDList():
+        for idx, links in enumerate(sim.trafficlight.getControlledLinks(tls)):
+            for in_lane, out_lane, via in links:
+                table.setdefault(in_lane, []).append((tls, idx, out_lane, via))
+    return {lane: (tuple(dict.fromkeys(l[0] for l in links)), links) for lane, links in table.items()}
+
+
+def static_obstacles(sim) -> list[Obstacle]:
+    from shapely.geometry import Point, Polygon
+
+    out = []
+    for pid in sim.polygon.getIDList():
+        if sim.polygon.getType(pid) in OBSTACLE_TYPES:
+            shape = sim.polygon.getShape(pid)
+            if len(shape) >= 3:
+                out.append(Obstacle(pid, Polygon(shape)))
+    for pid in sim.poi.getIDList():
+        if sim.poi.getType(pid) in OBSTACLE_TYPES:
+            x, y = sim.poi.getPosition(pid)
+            out.append(Obstacle(pid, Point(x, y).buffer(0.3)))
+    return out
+
+
+class Actors:
+    """Every other actor's pose, read each step into arrays (geometric centres, ENU radians).
+
+    With libsumo the module-level C getters are called directly (``_libsumo.vehicle_getAngle``),
+    which skips one Python wrapper call per value; with traci (``--gui``) the usual ones.
+    """
+
+    def __init__(self, sim, recorder: Recorder, driver: ActorDriver):
+        self.sim, self.recorder, self.driver = sim, recorder, driver
+        raw = getattr(sim, "_libsumo", None)
+        self.raw = raw is not None and hasattr(raw, "vehicle_getPosition")
+        src = ((raw.vehicle_getPosition, raw.person_getPosition, raw.vehicle_getAngle, raw.person_getAngle,
+                raw.vehicle_getSpeed, raw.person_getSpeed) if self.raw else
+               (sim.vehicle.getPosition, sim.person.getPosition, sim.vehicle.getAngle, sim.person.getAngle,
+                sim.vehicle.getSpeed, sim.person.getSpeed))
+        self.v_pos, self.p_pos, self.v_angle, self.p_angle, self.v_speed, self.p_speed = src
+        self.sizes: dict[str, tuple[float, float, int]] = {}  # id -> length, width, recorder index
+        self.key: tuple = ((), ())  # (vehicle ids, person ids) of the last read
+        self._set_ids((), ())
+
+    def _set_ids(self, vehicles: Sequence[str], persons: Sequence[str]) -> None:
+        sim, rec, sizes = self.sim, self.recorder, self.sizes
+        rows = []
+        for kind, domain, ids in (("vehicle", sim.vehicle, vehicles), ("pedestrian", sim.person, persons)):
+            for aid in ids:
+                info = sizes.get(aid)
+                if info is None:  # sizes are fixed: read them once per actor
+                    length, width = domain.getLength(aid), domain.getWidth(aid)
+                    info = sizes[aid] = (length, width, rec.actor_index(aid, kind, length, width))
+                rows.append(info)
+        self.ids = list(vehicles) + list(persons)
+        self.kinds = ["vehicle"] * len(vehicles) + ["pedestrian"] * len(persons)
+        a = np.asarray(rows, dtype=float).reshape(-1, 3)
+        self.length, self.width, self.index = a[:, 0].copy(), a[:, 1].copy(), a[:, 2].copy()
+        self.length_list, self.width_list = self.length.tolist(), self.width.tolist()
+        self.half_list = [0.5 * length for length in self.length_list]
+        self.index_list = [int(i) for i in self.index.tolist()]
+        self.row = {aid: k for k, aid in enumerate(self.ids)}
+
+    def read(self, vehicles: Sequence[str], persons: Sequence[str]):
+        """(x, y, heading, speed) arrays aligned with ``self.ids`` for this step.
+
+        Plain Python on lists, then one array per column: for a few dozen actors between two
+        SUMO steps this is cheaper than numpy arithmetic, and it leaves SUMO's data in the
+        cache (numpy's code paths measurably slow the next SUMO step down).
+        """
+        key = (vehicles, persons)
+        if key != self.key:
+            self.key = key
+            self._set_ids(vehicles, persons)
+        if not self.ids:
+            e = np.empty(0)
+            self.lists = ([], [], [], [])
+            return e, e, e, e
+        if self.raw:  # the C getters take (id, includeZ)
+            pos = chain(map(self.v_pos, vehicles, repeat(False)), map(self.p_pos, persons, repeat(False)))
+        else:
+            pos = chain(map(self.v_pos, vehicles), map(self.p_pos, persons))
+        deg = math.pi / 180.0
+        hs = [(90.0 - a) * deg for a in chain(map(self.v_angle, vehicles), map(self.p_angle, persons))]
+        vs = list(chain(map(self.v_speed, vehicles), map(self.p_speed, persons)))
+        cos, sin = math.cos, math.sin
+        xs, ys = [], []
+        for (px, py), half, h in zip(pos, self.half_list, hs):  # SUMO positions are front bumpers
+            xs.append(px - half * cos(h))
+            ys.append(py - half * sin(h))
+        if self.driver.walkers:  # SUMO's speed of a person moved by moveToXY is not its walking speed
+            for pid, w in self.driver.walkers.items():
+                k = self.row.get(pid)
+                if k is not None:
+                    vs[k] = w[5]
+        self.lists = (xs, ys, hs, vs)
+        return np.array(xs), np.array(ys), np.array(hs), np.array(vs)
+
+    def observed(self, ex: float, ey: float) -> tuple[ObjectState, ...]:
+        """The actors of the last :meth:`read` within :data:`OBSERVATION_RADIUS` of (ex, ey), for the ADS."""
+        xs, ys, hs, vs = self.lists
+        if not xs:
+            return ()
+        r2 = OBSERVATION_RADIUS ** 2
+        near = [(x - ex) * (x - ex) + (y - ey) * (y - ey) < r2 for x, y in zip(xs, ys)]
+        columns = (self.ids, self.kinds, xs, ys, hs, vs, self.length_list, self.width_list)
+        return tuple(map(ObjectState, *(compress(col, near) for col in columns)))
