@@ -41,7 +41,14 @@ OK, CRASH, HANG, PLUGIN_ERROR, INTERNAL_ERROR = "ok", "simulator-crash", "hang",
 #: Finding kinds that are not oracle verdicts but failures of the system under test or of SUMO.
 FAILURE_KINDS = (CRASH, HANG, PLUGIN_ERROR, INTERNAL_ERROR)
 
-_HEADER = struct.Struct(">Q")
+_MAGIC = b"DFZ1"
+_HEADER = struct.Struct(">4sQ")  # magic, length: anything else on the pipe is a protocol error
+#: [s] for the child to import drivefuzz and libsumo and say it is ready (not part of an execution's time)
+START_TIMEOUT = 120.0
+
+
+class ProtocolError(Exception):
+    """The child wrote something that is not a reply."""
 
 
 @dataclass
@@ -56,8 +63,20 @@ class Outcome:
 
 def _send(fh: BinaryIO, obj: Any) -> None:
     data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
-    fh.write(_HEADER.pack(len(data)) + data)
+    fh.write(_HEADER.pack(_MAGIC, len(data)) + data)
     fh.flush()
+
+
+def _receive(fd: int, deadline: float | None) -> Any:
+    """The next message on fd; None on EOF (the child died); TimeoutError; ProtocolError."""
+    header = _read_exact(fd, _HEADER.size, deadline)
+    if header is None:
+        return None
+    magic, size = _HEADER.unpack(header)
+    if magic != _MAGIC:
+        raise ProtocolError(f"unexpected bytes on the result pipe: {header!r}")
+    body = _read_exact(fd, size, deadline)
+    return None if body is None else pickle.loads(body)
 
 
 def _read_exact(fd: int, n: int, deadline: float | None) -> bytes | None:
@@ -111,15 +130,26 @@ class SimHost:
         env = dict(os.environ)
         # plugins importable in the parent (installed, or on a test's sys.path) must be importable here too
         env["PYTHONPATH"] = self._path = self._pythonpath()
+        # its own session: a terminal's Ctrl-C does not reach it, and killpg also ends what a plugin started
         self.proc = subprocess.Popen([sys.executable, "-m", "drivefuzz.simhost"], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, env=env, close_fds=True)
+                                     stdout=subprocess.PIPE, env=env, close_fds=True, start_new_session=True)
         self.starts += 1
+        try:
+            ready = _receive(self.proc.stdout.fileno(), time.monotonic() + START_TIMEOUT)
+        except (TimeoutError, ProtocolError):
+            ready = None
+        if ready != ("ready",):
+            self._kill()
+            raise SimulationError(f"the simulation host did not start ({sys.executable} -m drivefuzz.simhost)")
 
     def _kill(self) -> None:
         if self.proc is None:
             return
         if self.proc.poll() is None:
-            self.proc.kill()
+            try:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
         self.proc.wait()
         for fh in (self.proc.stdin, self.proc.stdout):
             try:
@@ -142,6 +172,13 @@ class SimHost:
         if self.proc is None or self.proc.poll() is not None or self._path != self._pythonpath():
             self._kill()  # dead, or the parent's import path changed (a plugin was just made importable)
             self._start()
+        try:
+            return self._execute(scenario, oracle_settings)
+        except BaseException:  # e.g. Ctrl-C while waiting: the child's reply would be out of step
+            self._kill()
+            raise
+
+    def _execute(self, scenario, oracle_settings) -> Outcome:
         t0 = time.monotonic()
         request = ("execute", scenario.model_dump(mode="json"), oracle_settings or {})
         try:
@@ -149,21 +186,22 @@ class SimHost:
         except (BrokenPipeError, OSError):
             pass  # the child is already dead; reading below says how
         deadline = None if self.timeout_s is None else t0 + self.timeout_s
-        fd = self.proc.stdout.fileno()
         try:
-            header = _read_exact(fd, _HEADER.size, deadline)
-            body = None if header is None else _read_exact(fd, _HEADER.unpack(header)[0], deadline)
+            reply = _receive(self.proc.stdout.fileno(), deadline)
         except TimeoutError:
             self._kill()
             return Outcome(HANG, detail=f"no result within {self.timeout_s:g} s wall-clock",
                            error_type="timeout", wall_time=time.monotonic() - t0)
-        if body is None:
+        except (ProtocolError, pickle.UnpicklingError, EOFError) as exc:
+            self._kill()
+            return Outcome(INTERNAL_ERROR, detail=str(exc)[:500], error_type=type(exc).__name__,
+                           wall_time=time.monotonic() - t0)
+        if reply is None:
             rc = self.proc.wait()
             self._kill()
             name = _signal_name(rc)
             return Outcome(CRASH, detail=f"simulation process died: {name}", error_type=name,
                            wall_time=time.monotonic() - t0)
-        reply = pickle.loads(body)
         wall = time.monotonic() - t0
         if reply[0] == OK:
             return Outcome(OK, execution=reply[1], wall_time=wall)
@@ -179,21 +217,44 @@ def _watch_parent(parent: int) -> None:
             os._exit(0)
 
 
+def _die_with_parent() -> None:
+    """Linux: the kernel kills this process when its parent dies, even while native code holds the GIL."""
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+
+
 def _serve() -> None:
+    parent = os.getppid()
+    _die_with_parent()
+    if os.getppid() != parent:  # the parent died before prctl took effect
+        os._exit(0)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    threading.Thread(target=_watch_parent, args=(os.getppid(),), daemon=True).start()
-    inp, out = sys.stdin.buffer, sys.stdout.buffer
-    sys.stdout = sys.stderr  # a print() in a plugin must not corrupt the protocol
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True).start()
+    # the protocol gets private copies of fds 0 and 1; whatever a plugin or SUMO writes to fd 1
+    # (print, os.write, a subprocess) goes to stderr instead, and nothing can read the requests
+    inp = os.fdopen(os.dup(0), "rb")
+    out = os.fdopen(os.dup(1), "wb")
+    os.dup2(2, 1)
+    devnull = os.open(os.devnull, os.O_RDONLY)
+    os.dup2(devnull, 0)
+    os.close(devnull)
+    sys.stdout = sys.stderr
 
     from drivefuzz.execute import execute
     from drivefuzz.oracle import OracleSettings
     from drivefuzz.scenario import Scenario
 
+    _send(out, ("ready",))
     while True:
         header = inp.read(_HEADER.size)
         if len(header) < _HEADER.size:
             return
-        msg = pickle.loads(inp.read(_HEADER.unpack(header)[0]))
+        msg = pickle.loads(inp.read(_HEADER.unpack(header)[1]))
         if msg[0] == "exit":
             return
         _, scenario_json, settings = msg
@@ -203,10 +264,16 @@ def _serve() -> None:
             reply: tuple = (OK, ex)
         except PluginError as exc:
             reply = ("error", PLUGIN_ERROR, type(exc.__cause__ or exc).__name__, _one_line(exc), traceback.format_exc())
+        except SystemExit as exc:  # sys.exit() in a plugin must not end the host quietly
+            reply = ("error", PLUGIN_ERROR, "SystemExit", f"sys.exit({exc.code!r}) called during the execution",
+                     traceback.format_exc())
         except Exception as exc:  # noqa: BLE001 - reported to the parent, which records it and goes on
-            status = INTERNAL_ERROR
-            reply = ("error", status, type(exc).__name__, _one_line(exc), traceback.format_exc())
-        _send(out, reply)
+            reply = ("error", INTERNAL_ERROR, type(exc).__name__, _one_line(exc), traceback.format_exc())
+        try:
+            _send(out, reply)
+        except Exception as exc:  # noqa: BLE001 - e.g. a plugin put something unpicklable in a Misbehavior
+            _send(out, ("error", INTERNAL_ERROR, type(exc).__name__,
+                        f"the result could not be sent back: {_one_line(exc)}", traceback.format_exc()))
 
 
 def _one_line(exc: BaseException) -> str:

@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
+import subprocess
+import sys
+import time
 
 import pytest
 from click.testing import CliRunner
@@ -11,6 +15,7 @@ from drivefuzz.cli import main
 from drivefuzz.fuzz import Campaign, FuzzConfig
 from drivefuzz.scenario import AdsSpec, SimOptions
 from drivefuzz.simhost import CRASH, HANG, OK, PLUGIN_ERROR, SimHost
+from drivefuzz.sumofiles import write_scenario
 
 FAILING = "crashy_plugins:FailingADS"
 
@@ -43,6 +48,52 @@ def test_exception_in_an_ads_plugin_is_a_plugin_error(town_scenario):
     assert "planned failure" in out.detail
 
 
+def test_a_plugin_writing_to_stdout_does_not_disturb_the_host(town_scenario):
+    with SimHost(timeout_s=60) as host:
+        out = host.execute(_with_ads(town_scenario, failure="stdout", at=0.5))
+    assert out.status == OK and out.execution.termination.value == "time_limit", out  # ran all 10 s
+
+
+def test_sys_exit_in_a_plugin_is_a_plugin_error(town_scenario):
+    with SimHost(timeout_s=60) as host:
+        out = host.execute(_with_ads(town_scenario, failure="exit", at=0.5))
+        assert out.status == PLUGIN_ERROR and out.error_type == "SystemExit", out
+        assert host.execute(_with_ads(town_scenario, failure="none")).status == OK  # the host lived on
+
+
+def test_the_host_dies_with_its_parent_even_while_holding_the_gil(tmp_path, town_scenario):
+    folder = tmp_path / "s"
+    write_scenario(_with_ads(town_scenario, failure="spin", at=0.5), folder)
+    script = (
+        "import sys\n"
+        "from drivefuzz.simhost import SimHost\n"
+        "from drivefuzz.sumofiles import load_scenario\n"
+        f"sc = load_scenario({str(folder)!r})\n"
+        "h = SimHost(timeout_s=None)\n"
+        "h._start()\n"
+        "print(h.proc.pid, flush=True)\n"
+        "h.execute(sc)\n"
+    )
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))
+    parent = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True, env=env)
+    child = int(parent.stdout.readline())
+    time.sleep(2.0)  # the child is spinning in sum(range(...)) by now
+    parent.kill()
+    parent.wait()
+    t_end = time.monotonic() + 5
+    while _alive(child) and time.monotonic() < t_end:
+        time.sleep(0.05)
+    assert not _alive(child)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().split()[2] != "Z"
+    except FileNotFoundError:
+        return False
+
+
 def test_campaign_records_crash_findings_and_goes_on(tmp_path, town_scenario):
     seed = _with_ads(town_scenario, failure="abort", at=0.5)
     cfg = FuzzConfig(cycles=1, population=2, ads=seed.ads)
@@ -60,8 +111,6 @@ def test_campaign_records_crash_findings_and_goes_on(tmp_path, town_scenario):
 @pytest.mark.parametrize("failure, kind", [("none", None), ("hang", HANG)])
 def test_cli_campaign_with_exec_timeout(tmp_path, town_scenario, failure, kind):
     seeds = tmp_path / "seeds"
-    from drivefuzz.sumofiles import write_scenario
-
     write_scenario(_with_ads(town_scenario, 60.0, failure=failure, at=0.5), seeds / "000")
     result = CliRunner().invoke(main, ["fuzz", town_scenario.network, "--seeds", str(seeds), "-o", str(tmp_path / "o"),
                                        "--ads", FAILING, "--ads-option", f"failure={failure}", "--ads-option", "at=0.5",
