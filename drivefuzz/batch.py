@@ -123,6 +123,20 @@ def load_campaign_file(path: str | Path) -> CampaignFile:
             raise InvalidConfig(str(path), "matrix.networks", f"no such network {n!r}", "paths to .net.xml files")
         nets.append(str(p.resolve()))
     spec.matrix.networks = nets
+    from drivefuzz.ads import load_ads
+    from drivefuzz.fuzz import parse_duration
+
+    parse_duration(spec.campaign.budget, source=f"{path}: campaign.budget")
+    for ads in spec.matrix.ads:  # an unknown ADS or option is a mistake in this file, not a finding
+        try:
+            load_ads(ads.name, ads.options)
+        except InvalidConfig as exc:
+            raise InvalidConfig(str(path), "matrix.ads", exc.problem, exc.valid) from None
+    names = [c[0] for c in cells(spec)]
+    clash = sorted({n for n in names if names.count(n) > 1})
+    if clash:
+        raise InvalidConfig(str(path), "matrix", f"cells would share the directory cells/{clash[0]}",
+                            "distinct network file names, strategies, ADS entries and seeds")
     return spec
 
 
@@ -130,7 +144,7 @@ def cell_name(network: str, strategy: str, ads: AdsSpec, seed: int) -> str:
     opts = ""
     if ads.options:
         opts = "-" + hashlib.sha1(json.dumps(ads.options, sort_keys=True).encode()).hexdigest()[:6]
-    return f"{Path(network).name.split('.')[0]}-{strategy}-{ads.name.replace(':', '.')}{opts}-s{seed}"
+    return f"{Path(network).name.split('.')[0]}-{strategy}-{ads.name.replace(':', '~')}{opts}-s{seed}"
 
 
 def cells(spec: CampaignFile) -> list[tuple[str, str, str, AdsSpec, int]]:
@@ -155,7 +169,8 @@ def results_table(out: Path, spec: CampaignFile) -> list[dict[str, Any]]:
             db.close()
             from drivefuzz.fuzz import load_finding
 
-            found = [load_finding(v.parent) for v in sorted((d / "findings").glob("*/verdict.json"))]
+            found = [load_finding(f) for f in sorted((d / "findings").iterdir())
+                     if not f.name.startswith(".") and (f / "verdict.json").exists()]  # not half-written ones
             row["findings"] = len(found)
             row["distinct"] = len({f.misbehavior.signature() for f in found})
             counts: dict[str, int] = {}

@@ -2,14 +2,14 @@
 
 Exit codes: 0 ran clean; 1 misbehaviour found (``fuzz``, ``run``) or not
 reproduced (``replay``); 2 usage or input error (one line on stderr, no
-traceback); 3 the simulator or a plugin failed.
+traceback); 3 the simulator or a plugin failed (or, in a campaign, only
+internal errors were found); 130 aborted by a second Ctrl-C.
 """
 
 from __future__ import annotations
 
 import functools
 import json
-import re
 import signal
 import sys
 import time
@@ -22,6 +22,7 @@ import drivefuzz
 from drivefuzz.errors import DriveFuzzError, InvalidConfig, InvalidInput
 
 EXIT_CLEAN, EXIT_FOUND, EXIT_INPUT, EXIT_INTERNAL = 0, 1, 2, 3
+EXIT_ABORTED = 130  # a second Ctrl-C: what was finished is saved; --resume continues
 
 
 def _fail(msg: str, code: int) -> None:
@@ -39,17 +40,6 @@ def handle_errors(fn):
         except DriveFuzzError as exc:
             _fail(str(exc), EXIT_INTERNAL)
     return wrapper
-
-
-def parse_duration(text: str | None) -> float | None:
-    """'90', '90s', '10m', '2h', '1h30m' -> seconds."""
-    if text is None:
-        return None
-    m = re.fullmatch(r"\s*(?:(\d+(?:\.\d+)?)h)?\s*(?:(\d+(?:\.\d+)?)m)?\s*(?:(\d+(?:\.\d+)?)s?)?\s*", text)
-    if not m or not any(m.groups()):
-        raise InvalidConfig("--budget", None, f"cannot read duration {text!r}", "e.g. 90s, 10m, 2h, 1h30m")
-    h, mi, s = (float(g) if g else 0.0 for g in m.groups())
-    return h * 3600 + mi * 60 + s
 
 
 def parse_kv(pairs: Sequence[str], option: str) -> dict[str, Any]:
@@ -201,8 +191,8 @@ def _progress_printer():
               default=None, help="Mutation strategy [all].")
 @click.option("--cycles", type=int, default=None, help="Cycles per seed [10].")
 @click.option("--population", type=int, default=None, help="Mutants per cycle [8].")
-@click.option("--budget", default=None, help="Wall-clock budget, e.g. 90s, 10m, 2h.")
-@click.option("--max-execs", type=int, default=None, help="Stop after N executions.")
+@click.option("--budget", default=None, help="Wall-clock budget of this run, e.g. 90s, 10m, 2h.")
+@click.option("--max-execs", type=int, default=None, help="Stop after N executions (per run: a resume runs N more).")
 @click.option("--seed", "rng_seed", type=int, default=None, help="Campaign RNG seed [0].")
 @click.option("--seeds", "seeds_dir", type=click.Path(file_okay=False), help="Seed folder (default seeds/<network>/).")
 @click.option("--ads", "ads_name", default=None, help="ADS plugin under test [ego].")
@@ -221,7 +211,7 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
          ads_option, no_feedback, continue_after_finding, time_limit, jobs, scheduler, exec_timeout, no_isolation,
          oracle_kv, no_oracle, config_file):
     """Fuzz the ADS on NETWORK (a .net.xml). Exit 0: nothing found; 1: misbehaviour found; 2: bad input."""
-    from drivefuzz.fuzz import Campaign, FuzzConfig, load_campaign
+    from drivefuzz.fuzz import Campaign, FuzzConfig, load_campaign, parse_duration
     from drivefuzz.mutate import MutationConfig
     from drivefuzz.quality import QualityConfig
     from drivefuzz.scenario import AdsSpec
@@ -277,11 +267,30 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
                                 "a new directory, or --resume to continue it")
     if jobs is not None and jobs < 1:
         raise InvalidConfig("--jobs", str(jobs), "must be at least 1", "a positive integer")
+    from drivefuzz.cluster import BATCH_SYSTEMS
+
+    if scheduler in BATCH_SYSTEMS:
+        raise InvalidConfig("--scheduler", scheduler, "batch systems are run by 'drivefuzz campaign'",
+                            "tcp://HOST:PORT or a scheduler.json here; where = \"slurm\" in a campaign file")
     campaign = Campaign(out_dir, seeds, cfg, argv, on_progress=_progress_printer())
     where = scheduler or ("local" if (jobs or 1) > 1 else None)
-    findings = _run_campaign(campaign, bool(resume_dir), where, jobs or 1)
+    try:
+        findings = _run_campaign(campaign, bool(resume_dir), where, jobs or 1)
+    except KeyboardInterrupt:
+        findings = campaign.finish()
+        _print_summary(campaign, findings, out_dir)
+        click.echo("aborted", err=True)
+        sys.exit(EXIT_ABORTED)
     _print_summary(campaign, findings, out_dir)
-    sys.exit(EXIT_FOUND if findings else (EXIT_INTERNAL if campaign.failed_jobs else EXIT_CLEAN))
+    sys.exit(_exit_code(findings, bool(campaign.failed_jobs)))
+
+
+def _exit_code(findings, failed_jobs: bool) -> int:
+    from drivefuzz.simhost import INTERNAL_ERROR
+
+    if any(f.misbehavior.oracle != INTERNAL_ERROR for f in findings):
+        return EXIT_FOUND
+    return EXIT_INTERNAL if findings or failed_jobs else EXIT_CLEAN
 
 
 def _run_campaign(campaign, resume: bool, where: str | None, jobs: int):
@@ -293,15 +302,19 @@ def _run_campaign(campaign, resume: bool, where: str | None, jobs: int):
         click.echo("\nstopping after the current execution(s) (Ctrl-C again to abort)...", err=True)
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
+    def _started():
+        click.echo(f"fuzzing {len(campaign.seeds)} seed(s) -> {campaign.out}"
+                   + (f" on {jobs} local workers" if where == "local" else f" on {where}" if where else ""), err=True)
+
     old = signal.signal(signal.SIGINT, _stop)
-    click.echo(f"fuzzing {len(campaign.seeds)} seed(s) -> {campaign.out}"
-               + (f" on {jobs} local workers" if where == "local" else f" on {where}" if where else ""), err=True)
     try:
         if where is None:
+            _started()
             return campaign.run(resume=resume)
         from drivefuzz.cluster import dask_client
 
         with dask_client(where, jobs=jobs) as client:
+            _started()
             return campaign.run(resume=resume, client=client)
     finally:
         with contextlib.suppress(ValueError):
@@ -364,7 +377,7 @@ def campaign(campaign_file, out, resume_dir):
     """Run a batch: every cell of CAMPAIGN_FILE's matrix (networks x strategies x ADS x seeds) on Dask."""
     from drivefuzz.batch import CampaignFile, cells, load_campaign_file, results_table, write_results
     from drivefuzz.cluster import BATCH_SYSTEMS, dask_client
-    from drivefuzz.fuzz import Campaign, FuzzConfig, run_on_dask
+    from drivefuzz.fuzz import Campaign, FuzzConfig, load_campaign, parse_duration, run_on_dask
     from drivefuzz.oracle import OracleSettings
     from drivefuzz.storage import atomic_write_json
 
@@ -382,6 +395,10 @@ def campaign(campaign_file, out, resume_dir):
         if not campaign_file:
             raise InvalidConfig("campaign", "CAMPAIGN_FILE", "missing", "a TOML file, or --resume DIR")
         spec = load_campaign_file(campaign_file)
+        if spec.run.where in BATCH_SYSTEMS:
+            from drivefuzz.cluster import check_submit_command
+
+            check_submit_command(spec.run.where)
         settings = OracleSettings(settings=spec.oracles)
         settings.instantiate()  # unknown oracles or settings fail now, with the file's name
         out_dir = Path(out) if out else Path("drivefuzz-out") / time.strftime("campaign-%Y%m%d-%H%M%S")
@@ -396,13 +413,16 @@ def campaign(campaign_file, out, resume_dir):
     work, campaigns = [], []
     totals = _batch_progress(campaigns)
     for name, network, strategy, ads, seed in cells(spec):
-        seeds = _seeds_for(network, None, count=c.seeds_per_network)[:c.seeds_per_network]
+        cell_dir = out_dir / "cells" / name
+        if (cell_dir / "manifest.json").exists():  # resuming: the cell's own seeds, wherever this runs from
+            seeds = load_campaign(cell_dir)[0]
+        else:
+            seeds = _seeds_for(network, None, count=c.seeds_per_network)[:c.seeds_per_network]
         cfg = FuzzConfig(cycles=c.cycles, population=c.population, strategy=strategy, seed=seed, budget_s=budget_s,
                          max_execs=c.max_execs, feedback=not c.no_feedback,
                          continue_after_finding=c.continue_after_finding, ads=ads,
                          oracles=OracleSettings(settings=spec.oracles), mutation=spec.mutation, quality=spec.quality,
                          time_limit=c.time_limit, exec_timeout_s=c.exec_timeout)
-        cell_dir = out_dir / "cells" / name
         camp = Campaign(cell_dir, seeds, cfg, argv, on_progress=totals)
         work.append((camp, camp.prepare(resume=(cell_dir / "manifest.json").exists())))
         campaigns.append(camp)
@@ -416,11 +436,16 @@ def campaign(campaign_file, out, resume_dir):
     old = signal.signal(signal.SIGINT, _stop)
     where = spec.run.where
     click.echo(f"{len(campaigns)} cell(s) on {where} -> {out_dir}", err=True)
+    aborted = False
     try:
         with dask_client(where, jobs=spec.run.jobs, batch=spec.cluster if where in BATCH_SYSTEMS else None) as client:
             run_on_dask(client, work, max_running=spec.run.cells_at_once)
+    except KeyboardInterrupt:
+        aborted = True
     finally:
         signal.signal(signal.SIGINT, old)
+        for camp in campaigns:
+            camp.finish()
         rows = results_table(out_dir, spec)
         write_results(out_dir, rows)
     click.echo("", err=True)
@@ -430,6 +455,8 @@ def campaign(campaign_file, out, resume_dir):
     click.echo(f"results in {out_dir / 'results.csv'}")
     if any(r["status"] != "done" for r in rows):
         click.echo(f"continue with: drivefuzz campaign --resume {out_dir}", err=True)
+    if aborted:
+        sys.exit(EXIT_ABORTED)
     failed = any(camp.failed_jobs for camp in campaigns)
     sys.exit(EXIT_FOUND if any(r["findings"] for r in rows) else (EXIT_INTERNAL if failed else EXIT_CLEAN))
 
@@ -471,8 +498,12 @@ def replay(finding, gui):
     vpath = folder / "verdict.json"
     if not vpath.is_file():
         raise InvalidConfig(finding, None, "not a finding directory (no verdict.json)", "findings/<n>-<oracle>-<hash>/")
-    verdict = json.loads(vpath.read_text())
-    want = Misbehavior.from_dict(verdict["misbehaviors"][0])
+    try:
+        verdict = json.loads(vpath.read_text())
+        want = Misbehavior.from_dict(verdict["misbehaviors"][0])
+    except (ValueError, KeyError, IndexError, TypeError) as exc:
+        raise InvalidConfig(str(vpath), None, f"unreadable verdict ({type(exc).__name__})",
+                            "a verdict.json written by drivefuzz fuzz") from None
     sc = read_scenario(folder)
     if want.oracle in FAILURE_KINDS:  # a crash, hang or plugin error: run it isolated again
         from drivefuzz.simhost import SimHost

@@ -55,6 +55,21 @@ def make_batch_cluster(spec: BatchSpec):
                "sge": dask_jobqueue.SGECluster, "lsf": dask_jobqueue.LSFCluster}
     if spec.backend not in classes:
         raise InvalidConfig("cluster.backend", spec.backend, "unknown batch system", ", ".join(BATCH_SYSTEMS))
+    return classes[spec.backend](**batch_kwargs(spec))
+
+
+def check_submit_command(backend: str) -> None:
+    """Fail now, in one line, where the batch system's submit command is missing (not later, in a hang)."""
+    import shutil
+
+    command = {"slurm": "sbatch", "pbs": "qsub", "sge": "qsub", "lsf": "bsub"}[backend]
+    if shutil.which(command) is None:
+        raise InvalidConfig("run.where", backend, f"'{command}' is not on this machine's PATH",
+                            "run drivefuzz campaign on the cluster's login node, or where = \"local\"")
+
+
+def batch_kwargs(spec: BatchSpec) -> dict[str, Any]:
+    """dask-jobqueue arguments for ``spec``: every worker a single-threaded process."""
     kwargs: dict[str, Any] = dict(cores=spec.cores, processes=spec.cores, memory=spec.memory, walltime=spec.walltime,
                                   queue=spec.queue, job_script_prologue=list(spec.prologue))
     if spec.account:
@@ -67,7 +82,7 @@ def make_batch_cluster(spec: BatchSpec):
         kwargs["log_directory"] = spec.log_directory
     # retire workers before the walltime kills them; adapt() starts new ones and the jobs resume there
     kwargs["worker_extra_args"] = ["--lifetime", _lifetime(spec.walltime), "--lifetime-stagger", "2m"]
-    return classes[spec.backend](**kwargs)
+    return kwargs
 
 
 def _lifetime(walltime: str) -> str:
@@ -87,10 +102,12 @@ def dask_client(where: str = "local", jobs: int = 2, batch: BatchSpec | None = N
 
     with dask.config.set(DASK_SETTINGS), contextlib.ExitStack() as stack:
         if where == "local":
+            stack.enter_context(dask.config.set({"distributed.worker.preload": ["drivefuzz.cluster"]}))
             cluster = stack.enter_context(LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
                                                        dashboard_address=None, silence_logs=40))
             client = stack.enter_context(Client(cluster))
         elif where in BATCH_SYSTEMS:
+            check_submit_command(where)
             spec = (batch or BatchSpec()).model_copy(update={"backend": where})
             cluster = stack.enter_context(make_batch_cluster(spec))
             cluster.adapt(minimum_jobs=1, maximum_jobs=spec.max_jobs)
@@ -103,15 +120,26 @@ def dask_client(where: str = "local", jobs: int = 2, batch: BatchSpec | None = N
 def _connect(where: str):
     from distributed import Client
 
+    is_file = where.endswith(".json") or Path(where).is_file()
+    if is_file and not Path(where).is_file():
+        raise InvalidConfig("--scheduler", where, "no such scheduler file", "tcp://HOST:PORT or a scheduler.json")
+    if not is_file and "://" not in where and ":" not in where:
+        raise InvalidConfig("--scheduler", where, "not a scheduler address",
+                            "local, tcp://HOST:PORT, a scheduler.json, or " + "/".join(BATCH_SYSTEMS))
     try:
-        if where.endswith(".json") or Path(where).is_file():
-            if not Path(where).is_file():
-                raise InvalidConfig("--scheduler", where, "no such scheduler file", "tcp://HOST:PORT or a scheduler.json")
-            return Client(scheduler_file=where, timeout="20s")
-        if "://" not in where and ":" not in where:
-            raise InvalidConfig("--scheduler", where, "not a scheduler address",
-                                "local, tcp://HOST:PORT, a scheduler.json, or " + "/".join(BATCH_SYSTEMS))
-        return Client(where, timeout="20s")
-    except (OSError, TimeoutError) as exc:
-        raise InvalidConfig("--scheduler", where, f"cannot reach the Dask scheduler ({type(exc).__name__})",
-                            "the address a running 'dask scheduler' printed") from None
+        return Client(scheduler_file=where, timeout="20s") if is_file else Client(where, timeout="20s")
+    except (OSError, TimeoutError, ValueError, AssertionError, KeyError) as exc:
+        # OSError/TimeoutError: nobody listens; ValueError: a malformed address; AssertionError/KeyError:
+        # a scheduler file that is not one
+        raise InvalidConfig("--scheduler", where, f"cannot reach the Dask scheduler ({type(exc).__name__}: {exc})",
+                            "the address a running 'dask scheduler' printed, or its --scheduler-file") from None
+
+
+def dask_setup(worker) -> None:
+    """Worker preload (``distributed.worker.preload``): a terminal's Ctrl-C reaches every process in the
+    foreground group, but only the campaign process decides how a campaign stops."""
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)

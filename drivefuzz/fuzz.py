@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shlex
 import sqlite3
 import time
@@ -128,6 +129,17 @@ class Progress:
         return self.new_execs / max(time.monotonic() - self.started, 1e-9)
 
 
+def parse_duration(text: str | None, source: str = "--budget") -> float | None:
+    """'90', '90s', '10m', '2h', '1h30m' -> seconds."""
+    if text is None:
+        return None
+    m = re.fullmatch(r"\s*(?:(\d+(?:\.\d+)?)h)?\s*(?:(\d+(?:\.\d+)?)m)?\s*(?:(\d+(?:\.\d+)?)s?)?\s*", str(text))
+    if not m or not any(m.groups()):
+        raise InvalidConfig(source, None, f"cannot read duration {text!r}", "e.g. 90s, 10m, 2h, 1h30m")
+    h, mi, sec = (float(g) if g else 0.0 for g in m.groups())
+    return h * 3600 + mi * 60 + sec
+
+
 def replay_command(finding_dir: Path) -> str:
     return f"drivefuzz replay {shlex.quote(str(finding_dir))}"
 
@@ -167,25 +179,26 @@ class Campaign:
             atomic_write_json(self.out / "manifest.json", {
                 "drivefuzz": drivefuzz.__version__, "command": self.argv, "config": self.cfg.to_json(),
                 "seed": self.cfg.seed, "seeds": [f"seeds/{i:03d}" for i in range(len(self.seeds))],
-                "started": time.strftime("%Y-%m-%dT%H:%M:%S"),
+                "started": time.strftime("%Y-%m-%dT%H:%M:%S"), "run": 1,
             })
-        else:  # budgets may be given anew on resume; the rest of the configuration is the campaign's
+        else:  # a resume is a new run, with budgets of its own; the rest of the configuration is the campaign's
             manifest = json.loads((self.out / "manifest.json").read_text())
             manifest["config"].update(budget_s=self.cfg.budget_s, max_execs=self.cfg.max_execs)
+            manifest["run"] = manifest.get("run", 1) + 1
             atomic_write_json(self.out / "manifest.json", manifest)
         (self.out / STOP_FILE).unlink(missing_ok=True)
         self.db = sqlite3.connect(self.out / "index.sqlite")
         self.db.executescript("DROP TABLE IF EXISTS executions;" + SCHEMA)  # derived data: rebuilt from journals
         self._offsets = {}
         self.findings, self.progress.execs, self.progress.findings = [], 0, 0
-        self.poll()
+        self.poll(quiet=True)
         self.progress.new_execs = 0
         self.progress.started = time.monotonic()
         pending = [i for i in range(len(self.seeds)) if not (job_dir(self.out, i) / "summary.json").exists()]
         self.progress.jobs_done = len(self.seeds) - len(pending)
         return pending
 
-    def poll(self) -> int:
+    def poll(self, quiet: bool = False) -> int:
         """Index the executions the jobs have journalled since the last poll; return how many."""
         new = 0
         for si in range(len(self.seeds)):
@@ -209,7 +222,8 @@ class Campaign:
         if new:
             self.db.commit()
             self.progress.new_execs += new
-            self.on_progress(self.progress)
+            if not quiet:
+                self.on_progress(self.progress)
         return new
 
     def _index(self, rec: dict[str, Any]) -> None:
@@ -234,7 +248,7 @@ class Campaign:
             return True
         if self._deadline is not None and time.monotonic() >= self._deadline:
             return True
-        return self.cfg.max_execs is not None and self.progress.execs >= self.cfg.max_execs
+        return self.cfg.max_execs is not None and self.progress.new_execs >= self.cfg.max_execs
 
     def request_stop(self) -> None:
         (self.out / STOP_FILE).touch()
@@ -251,6 +265,8 @@ class Campaign:
         return self.finish()
 
     def finish(self) -> list[Finding]:
+        if not hasattr(self, "db"):  # stopped before it was prepared
+            return self.findings
         self.poll()
         self.findings.sort(key=lambda f: f.path.name)
         return self.findings
@@ -292,6 +308,8 @@ def run_on_dask(client, work: list[tuple[Campaign, list[int]]], max_running: int
     stopped: set[int] = set()
     try:
         while queue or active:
+            if queue and any(c.stop_requested for c, _ in work):
+                queue.clear()  # Ctrl-C: start nothing new
             while queue and (max_running is None or len(running) < max_running):
                 campaign, pending = queue.pop(0)
                 running.append(campaign)
@@ -315,11 +333,13 @@ def run_on_dask(client, work: list[tuple[Campaign, list[int]]], max_running: int
                     continue
                 if summary["status"] == "done":
                     campaign.progress.jobs_done += 1
+            busy = {key for keys in client.processing().values() for key in keys}
             for campaign in list(running):
                 left = [f for f, (c, _) in active.items() if c is campaign]
-                campaign.progress.jobs_running = len(left)
+                campaign.progress.jobs_running = sum(1 for f in left if f.key in busy)
                 campaign.on_progress(campaign.progress)
                 if not left:
+                    campaign.poll()  # what the last jobs journalled after the poll above
                     running.remove(campaign)
     except BaseException:  # Ctrl-C twice, or the client lost the scheduler: stop the jobs, keep their work
         for campaign, _ in work:

@@ -24,6 +24,12 @@ Files of job ``NNN`` (the seed index) under ``jobs/NNN/``::
                       {"event": "end", ...the execution's record} after it
     checkpoint.json   the cycle reached and the current scenario (atomic)
     summary.json      written last, when the job has finished its seed: the DONE marker
+    owner             the attempt that owns the job: an older attempt that is still running
+                      (its client died, or Dask lost touch with its worker) stops at its next execution
+
+Budgets: ``--max-execs`` counts the executions of one run of the campaign (a resume
+is a new run). Each execution first claims a ticket, a file ``budget/run<R>/<n>``
+created with O_EXCL, so parallel jobs never run more than the budget between them.
 
 Findings go to ``findings/NNN-KK-<oracle>-<hash>/`` and successors to ``corpus/<hash>/``.
 A file ``STOP`` in the campaign directory makes every job return after its
@@ -36,6 +42,7 @@ import json
 import os
 import random
 import time
+import uuid
 from pathlib import Path
 from typing import Any, Callable
 
@@ -64,9 +71,13 @@ def read_journal(path: Path) -> list[dict[str, Any]]:
     return records
 
 
-def _append(path: Path, rec: dict[str, Any]) -> None:
-    with open(path, "a") as fh:
-        fh.write(json.dumps(rec, sort_keys=True) + "\n")
+def _append(path: Path, rec: dict[str, Any], after_kill: bool = False) -> None:
+    with open(path, "ab+") as fh:
+        lead = b""
+        if after_kill and fh.tell() > 0:  # a kill may have torn the last line: start on a line of our own
+            fh.seek(-1, os.SEEK_END)
+            lead = b"" if fh.read(1) == b"\n" else b"\n"
+        fh.write(lead + json.dumps(rec, sort_keys=True).encode() + b"\n")
         fh.flush()
         os.fsync(fh.fileno())
 
@@ -87,6 +98,8 @@ class SeedJob:
         self.dir = job_dir(self.out, seed_index)
         manifest = json.loads((self.out / "manifest.json").read_text())
         self.cfg = FuzzConfig.from_json(manifest["config"])
+        self.run_id = manifest.get("run", 1)
+        self._ticket = 0
         self.seed = load_scenario(self.out / manifest["seeds"][seed_index])
         self.journal = self.dir / "journal.jsonl"
         self.findings: list[str] = []
@@ -116,6 +129,35 @@ class SeedJob:
         self.findings.append(rel)
         return rel
 
+    def _owned(self) -> bool:
+        try:
+            return (self.dir / "owner").read_text() == self.token
+        except FileNotFoundError:
+            return False
+
+    def _claim_ticket(self) -> bool:
+        """Take one execution out of this run's --max-execs budget; False when it is spent."""
+        limit = self.cfg.max_execs
+        if limit is None:
+            return True
+        folder = self.out / "budget" / f"run{self.run_id}"
+        folder.mkdir(parents=True, exist_ok=True)
+        while self._ticket < limit:
+            n, self._ticket = self._ticket, self._ticket + 1
+            try:
+                os.close(os.open(folder / f"{n:07d}", os.O_CREAT | os.O_EXCL | os.O_WRONLY))
+                return True
+            except FileExistsError:
+                continue
+        return False
+
+    def _sweep(self) -> None:
+        """Remove this job's half-written finding folders (a kill inside atomic_dir)."""
+        import shutil
+
+        for leftover in (self.out / "findings").glob(f".{self.si:03d}-*"):
+            shutil.rmtree(leftover, ignore_errors=True)
+
     def _checkpoint(self, cycle: int, current) -> None:
         ref = None
         if current is not None:
@@ -140,14 +182,19 @@ class SeedJob:
 
         if should_stop():  # before loading anything: queued jobs return at once when the budget is spent
             return {"seed_index": self.si, "status": "stopped", "execs": None, "findings": [], "pid": os.getpid()}
+        self.token = f"{os.uname().nodename}:{os.getpid()}:{uuid.uuid4().hex}"
+        atomic_write_text(self.dir / "owner", self.token)
+        self._sweep()
         history = read_journal(self.journal)
         done = {r["key"]: r for r in history if r.get("event") == "end"}
         attempts = sum(1 for r in history if r.get("event") == "attempt") + 1
         _append(self.journal, {"event": "attempt", "pid": os.getpid(), "resumed_from": len(done),
-                               "host": os.uname().nodename, "time": time.time()})
+                               "host": os.uname().nodename, "time": time.time(), "run": self.run_id}, after_kill=True)
         self.findings = sorted({r["finding"] for r in done.values() if r.get("finding")})
         resumed_from = len(done)
         status = self._loop(done, should_stop, on_record or (lambda rec: None))
+        if status == "superseded":
+            return {"seed_index": self.si, "status": status, "execs": len(done), "pid": os.getpid()}
         summary = {"seed_index": self.si, "status": status, "execs": len(done), "findings": self.findings,
                    "resumed_from": resumed_from, "attempts": attempts, "pid": os.getpid()}
         if status == "done":
@@ -190,7 +237,9 @@ class SeedJob:
                     if rec["finding"] and not cfg.continue_after_finding:
                         return "done"
                     continue
-                if should_stop():
+                if not self._owned():
+                    return "superseded"
+                if should_stop() or not self._claim_ticket():
                     self._checkpoint(cycle, current)
                     return "stopped"
                 _append(self.journal, {"event": "start", "key": key, "hash": child.content_hash(),

@@ -5,7 +5,10 @@ Options (``--ads-option K=V``):
 - ``fault``: switch on a named fault, for evaluating oracles (the paper's tbl:oracle):
   ``speeding`` (target speed above the limit), ``no_traffic_lights`` (traffic-light
   detection disabled), ``no_control`` (control module disabled: no control output),
-  ``steer_left`` (steering forced left).
+  ``steer_left`` (steering forced left: from :data:`STEER_LEFT_DELAY` s after the first
+  step the steering command is a constant :data:`STEER_LEFT_COMMAND` of full lock to the
+  left, open loop, whatever the path tracker asks; on every committed seed the car
+  leaves its lane within three seconds of the takeover).
 - ``speed_margin``: fraction of the speed limit it aims for (default 0.95).
 - ``max_lat_accel``: comfort limit in curves [m/s^2].
 - ``sensor_range``: clear-weather sensor range [m].
@@ -25,6 +28,10 @@ from ego.planning import CELL, build_path, idm_accel, lawful_route, stop_accel
 from ego.sensing import Sensors, SensorSpec
 
 FAULTS = ("none", "speeding", "no_traffic_lights", "no_control", "steer_left")
+#: [s] the ``steer_left`` fault drives normally this long after the first step, then takes over.
+STEER_LEFT_DELAY = 1.0
+#: Steering command of the ``steer_left`` fault, as a fraction of full lock (0.15 rad at the road wheels).
+STEER_LEFT_COMMAND = 0.25
 
 
 class ReferenceADS(ADS):
@@ -56,6 +63,7 @@ class ReferenceADS(ADS):
         self.speed = SpeedController(max_decel=params.max_brake_decel)
         self._done = False
         self.s_center = 0.0
+        self._fault_t0: float | None = None  # [s] first step, for the ``steer_left`` fault
 
     def done(self) -> bool:
         return self._done
@@ -138,5 +146,9 @@ class ReferenceADS(ADS):
         s_rear = s_c - rear_off
         steer = self.tracker.steer(self.path, s_rear, rx, ry, ego.heading, v)
         if fault == "steer_left":
-            steer = min(1.0, steer + 0.25)
+            # open loop: a bias on the tracker's command would be corrected by the tracker itself
+            if self._fault_t0 is None:
+                self._fault_t0 = obs.t
+            if obs.t - self._fault_t0 >= STEER_LEFT_DELAY:
+                steer = STEER_LEFT_COMMAND
         return Control(steer, throttle, brake)

@@ -4,11 +4,9 @@ from __future__ import annotations
 
 import bisect
 import math
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from typing import Sequence
 
-import numpy as np
 from pydantic import Field
 
 from drivefuzz.oracle import Frame, Misbehavior, Oracle, RunContext
@@ -68,21 +66,12 @@ class _Lane:
         return best, head
 
 
-def _passenger_may(value: str | None) -> bool:
-    """Whether a SUMO changeLeft/changeRight permission list lets passenger cars change."""
-    if value is None:
-        return True
-    tokens = set(value.split())
-    return bool(tokens & {"all", "passenger", "private"}) if tokens else False
-
-
 class _NetIndex:
     """Per-network, read-only geometry for the oracle (built once per process and network)."""
 
     def __init__(self, rmap):
         net = rmap.net
         self.lanes: dict[str, _Lane] = {}
-        change = self._lane_change_permissions(str(rmap.path))
         for e in net.getEdges(withInternal=False):
             if e.getFunction() != "":
                 continue
@@ -102,14 +91,15 @@ class _NetIndex:
                 lane.total = cum
                 if not lane.segs:
                     continue
-                left, right = change.get(lane.id, (None, None))
-                lane.change_left, lane.change_right = _passenger_may(left), _passenger_may(right)
+                lane.change_left = rmap.may_change(lane.id, left=True)
+                lane.change_right = rmap.may_change(lane.id, left=False)
                 self.lanes[lane.id] = lane
         self.edge_lanes: dict[str, list[_Lane]] = {}
         for lane in self.lanes.values():
             self.edge_lanes.setdefault(lane.edge, []).append(lane)
         for lanes in self.edge_lanes.values():
             lanes.sort(key=lambda l: l.index)
+        self.edge_by_index = {e: {l.index: l for l in lanes} for e, lanes in self.edge_lanes.items()}
         # the reverse of every edge: same nodes, swapped
         by_nodes: dict[tuple[str, str], set[str]] = {}
         for lane in self.lanes.values():
@@ -167,27 +157,33 @@ class _NetIndex:
 
     def drivable_within(self, tol: float):
         """The drivable junction area grown by ``tol`` (prepared), or None."""
-        g = self._drivable_tol.get(tol)
-        if g is None and self.drivable is not None:
-            import shapely
+        return self._drivable_and_cells(tol)[0]
 
-            g = self.drivable.buffer(tol) if tol > 0 else self.drivable
-            shapely.prepare(g)
-            self._drivable_tol[tol] = g
-        return g
+    def drivable_cells(self, tol: float) -> frozenset[tuple[int, int]]:
+        """The grid cells (closed squares of ``_CELL``) that touch :meth:`drivable_within`: a point in
+        any other cell is certainly outside it, without asking shapely."""
+        return self._drivable_and_cells(tol)[1]
 
-    @staticmethod
-    def _lane_change_permissions(path: str) -> dict[str, tuple[str | None, str | None]]:
-        """lane id -> (changeLeft, changeRight) attributes (sumolib does not expose them)."""
-        out: dict[str, tuple[str | None, str | None]] = {}
-        for _ev, el in ET.iterparse(path, events=("end",)):
-            if el.tag == "lane":
-                left, right = el.get("changeLeft"), el.get("changeRight")
-                if left is not None or right is not None:
-                    out[el.get("id", "")] = (left, right)
-            elif el.tag in ("edge", "junction", "connection", "tlLogic"):
-                el.clear()
-        return out
+    def _drivable_and_cells(self, tol: float):
+        got = self._drivable_tol.get(tol)
+        if got is None:
+            got = (None, frozenset())
+            if self.drivable is not None:
+                import shapely
+
+                g = self.drivable.buffer(tol) if tol > 0 else self.drivable
+                shapely.prepare(g)
+                x0, y0, x1, y1 = g.bounds
+                cells = [(cx, cy) for cx in range(int(math.floor(x0 / _CELL)), int(math.floor(x1 / _CELL)) + 1)
+                         for cy in range(int(math.floor(y0 / _CELL)), int(math.floor(y1 / _CELL)) + 1)]
+                eps = 0.01  # [m] a cell touching the area only within rounding counts as touching
+                boxes = shapely.box([cx * _CELL - eps for cx, _ in cells], [cy * _CELL - eps for _, cy in cells],
+                                    [(cx + 1) * _CELL + eps for cx, _ in cells],
+                                    [(cy + 1) * _CELL + eps for _, cy in cells])
+                touch = shapely.intersects(g, boxes)
+                got = (g, frozenset(c for c, t in zip(cells, touch.tolist()) if t))
+            self._drivable_tol[tol] = got
+        return got
 
     def lanes_at(self, x: float, y: float) -> dict[str, tuple[_Lane, float, float]]:
         """lane id -> (lane, distance from its centre line, lane heading there) for lanes indexed near (x, y)."""
@@ -257,7 +253,9 @@ class LaneInvasionOracle(Oracle):
 
     Fast path: while the ego is on a straight normal lane with its whole body
     within that lane's bounds (and ``tolerance``), the frame costs one exact
-    rectangle-in-strip test (curved lanes: one projection per corner).
+    rectangle-in-strip test (curved lanes: one projection per corner). Off it,
+    shapely is asked about the junction area only when a corner lies in a grid
+    cell that touches it.
 
     One record per episode: after a record the oracle is silent until all
     corners were fine again. Kinds ``"opposite_lane"``, ``"sidewalk"``,
@@ -281,6 +279,10 @@ class LaneInvasionOracle(Oracle):
         self._tol = float(self.config.tolerance)
         self._jtol = float(self.config.junction_tolerance)
         self._drivable = self._idx.drivable_within(self._tol)
+        self._drivable_cells = self._idx.drivable_cells(self._tol)
+        import shapely
+
+        self._contains_xy = shapely.contains_xy
         self._hl = 0.5 * float(ctx.ego_length)
         self._hw = 0.5 * float(ctx.ego_width)
         self._reach = self._hl + self._hw
@@ -362,23 +364,21 @@ class LaneInvasionOracle(Oracle):
     def _slow(self, frame: Frame, pts, lane: _Lane | None) -> Sequence[Misbehavior]:
         """Corner by corner; ``lane`` is the ego's SUMO lane when it runs the ego's way (else None)."""
         tol = self._tol
-        if self._drivable is not None:
-            import shapely
-
-            xs = np.fromiter((p[0] for p in pts), float, 4)
-            ys = np.fromiter((p[1] for p in pts), float, 4)
-            in_junction = shapely.contains_xy(self._drivable, xs, ys)
-        else:
-            in_junction = np.zeros(4, dtype=bool)
+        cells = self._drivable_cells
+        if any((math.floor(px / _CELL), math.floor(py / _CELL)) in cells for px, py in pts):
+            in_junction = self._contains_xy(self._drivable, [p[0] for p in pts], [p[1] for p in pts]).tolist()
+            any_junction = True in in_junction
+        else:  # no corner near a junction (or the network has none)
+            in_junction, any_junction = [False] * 4, False
         home = self._home_lane
         if home is not None and lane is not None and lane.edge != home.edge:
             home = None
-        if home is None and lane is not None and lane.passenger and not in_junction.any():
+        if home is None and lane is not None and lane.passenger and not any_junction:
             # no lane of this edge has held the whole body yet: once the body has left the
             # junction, the lane SUMO puts the ego on is its own (a turn may end straddling)
             home = lane
         # entering or leaving a junction, a turning body sweeps across the lines that start there
-        tol_lane = max(tol, self._jtol) if in_junction.any() else tol
+        tol_lane = max(tol, self._jtol) if any_junction else tol
         worst = None  # (severity, kind, corner, lane id, depth)
         for i, (px, py) in enumerate(pts):
             if in_junction[i]:
@@ -419,9 +419,7 @@ class LaneInvasionOracle(Oracle):
                 continue
             if best_sev == 0:
                 if self._idx.walk is not None:
-                    import shapely
-
-                    if shapely.contains_xy(self._idx.walk, px, py):
+                    if self._contains_xy(self._idx.walk, px, py):
                         best_kind, best_sev = "sidewalk", _SEVERITY["sidewalk"]
                 if best_sev == 0:
                     best_sev = _SEVERITY["off_road"]
@@ -444,8 +442,7 @@ class LaneInvasionOracle(Oracle):
         """Passenger cars may change from lane ``home_index`` of ``target``'s edge to ``target``."""
         if target.index == home_index:
             return True
-        lanes = self._idx.edge_lanes.get(target.edge, ())
-        by_index = {l.index: l for l in lanes}
+        by_index = self._idx.edge_by_index.get(target.edge, {})
         if target.index > home_index:  # to the left
             return all(by_index[k].change_left for k in range(home_index, target.index) if k in by_index)
         return all(by_index[k].change_right for k in range(target.index + 1, home_index + 1) if k in by_index)

@@ -62,6 +62,10 @@ def test_small_campaign_runs_every_cell_and_resumes(tmp_path):
     (f"[matrix]\nnetworks = ['{TOWN}']\n[run]\nwhere = 'moon'\n", "run.where"),
     (f"[matrix]\nnetworks = ['{TOWN}']\n[cluster]\ncores = 0\n", "cluster.cores"),
     (f"[matrix]\nnetworks = ['{TOWN}']\n[campaign]\nbudgett = '1m'\n", "campaign.budgett"),
+    (f"[matrix]\nnetworks = ['{TOWN}']\n[campaign]\nbudget = 'soon'\n", "campaign.budget"),
+    (f"[matrix]\nnetworks = ['{TOWN}']\nads = [{{name = 'nosuchads'}}]\n", "matrix.ads"),
+    (f"[matrix]\nnetworks = ['{TOWN}']\nads = [{{name = 'ego', options = {{fault = 'bogus'}}}}]\n", "matrix.ads"),
+    (f"[matrix]\nnetworks = ['{TOWN}']\nseeds = [0, 0]\n", "share the directory"),
 ])
 def test_bad_campaign_file_is_one_line_naming_the_field(tmp_path, text, field):
     f = tmp_path / "bad.toml"
@@ -101,3 +105,11 @@ def test_campaign_json_records_the_resolved_matrix(tmp_path):
     CliRunner().invoke(main, ["campaign", str(spec_file), "-o", str(out)])
     saved = json.loads((out / "campaign.json").read_text())
     assert saved["matrix"]["networks"] == [str(TOWN.resolve())] and saved["campaign"]["max_execs"] == 1
+
+
+def test_a_batch_system_that_is_not_installed_is_one_line(tmp_path):
+    f = tmp_path / "c.toml"
+    f.write_text(f"[matrix]\nnetworks = ['{TOWN}']\n[run]\nwhere = 'slurm'\n")
+    result = CliRunner().invoke(main, ["campaign", str(f), "-o", str(tmp_path / "o")])
+    assert result.exit_code == 2 and "sbatch" in result.output and len(result.output.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()  # nothing written: the fixed file can use the same directory

@@ -121,3 +121,13 @@ def test_mission_with_no_route(tmp_path):
     path = tmp_path / "sc.json"
     path.write_text(sc.model_dump_json())
     _one_line_error(*_invoke(["run", str(path)]), "sc.json", "mission", "no route")
+
+
+def test_unusable_scheduler(tmp_path):
+    bad_json = tmp_path / "s.json"
+    bad_json.write_text("{not json")
+    for where, needle in (("foo:bar", "cannot reach"), ("udp://127.0.0.1:1", "cannot reach"),
+                          (str(bad_json), "cannot reach"), (str(tmp_path / "none.json"), "no such scheduler file"),
+                          ("slurm", "drivefuzz campaign"), ("nowhere", "not a scheduler address")):
+        _one_line_error(*_invoke(["fuzz", str(TOWN), "--scheduler", where, "--max-execs", "1",
+                                  "-o", str(tmp_path / "o")]), "--scheduler", needle)

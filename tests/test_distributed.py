@@ -177,3 +177,39 @@ def test_crashing_simulations_leave_the_dask_worker_alive(tmp_path, town_scenari
     assert [f.misbehavior.oracle for f in findings] == ["simulator-crash"] * 4
     job_pids = {r["pid"] for si in range(2) for r in _journal(tmp_path / "out", si) if r["event"] == "attempt"}
     assert job_pids <= worker_pids  # the same workers ran the jobs and are still there: no worker died
+
+
+def test_ctrl_c_to_the_whole_terminal_group_stops_jobs_2_cleanly(tmp_path, town_scenario, procs):
+    """A terminal's Ctrl-C reaches the local workers too: they must survive it and the campaign stop cleanly."""
+    seeds = tmp_path / "seeds"
+    for i, sc in enumerate(_seeds(town_scenario, 2)):
+        write_scenario(sc, seeds / f"{i:03d}")
+    out = tmp_path / "out"
+    cli = subprocess.Popen([sys.executable, "-m", "drivefuzz.cli", "fuzz", str(TOWN), "--seeds", str(seeds),
+                            "-o", str(out), "--jobs", "2", "--cycles", "30", "--population", "3",
+                            "--continue-after-finding", "--ads-option", "fault=speeding"],
+                           start_new_session=True, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    procs.procs.append(cli)
+    t_end = time.monotonic() + 120
+    while sum(r["event"] == "end" for si in range(2) for r in _journal(out, si)) < 3:
+        assert time.monotonic() < t_end and cli.poll() is None
+        time.sleep(0.05)
+    os.killpg(cli.pid, signal.SIGINT)  # what a terminal does: the client, its local cluster and its workers
+    stdout, stderr = cli.communicate(timeout=60)
+    assert cli.returncode == 1, stderr  # stopped with its (speeding) findings, not aborted
+    assert "continue with: drivefuzz fuzz --resume" in stderr and "Traceback" not in stderr, stderr
+    ended = [r for si in range(2) for r in _journal(out, si) if r["event"] == "end"]
+    assert 3 <= len(ended) < 180
+    rows = sqlite3.connect(out / "index.sqlite").execute("SELECT COUNT(*) FROM executions").fetchone()[0]
+    assert rows == len(ended)  # everything journalled is indexed
+    assert f"{len(ended)} executions" in stdout
+
+
+def test_max_execs_is_exact_with_parallel_jobs(tmp_path, town_scenario):
+    from drivefuzz.cluster import dask_client
+
+    cfg = FuzzConfig(max_execs=3, **CFG)
+    with dask_client("local", jobs=2) as client:
+        Campaign(tmp_path / "out", _seeds(town_scenario, 2), cfg).run(client=client)
+    ended = [r for si in range(2) for r in _journal(tmp_path / "out", si) if r["event"] == "end"]
+    assert len(ended) == 3

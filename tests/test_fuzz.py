@@ -44,7 +44,7 @@ def test_resume_continues_without_losing_or_repeating(tmp_path, town_scenario):
     from drivefuzz.fuzz import load_campaign
 
     seeds, cfg, _ = load_campaign(out)
-    cfg.max_execs = 6
+    cfg.max_execs = 3  # a resume is a new run with a budget of its own
     Campaign(out, seeds, cfg).run(resume=True)
     keys = _ended(out)
     assert keys[:3] == keys_first and len(keys) == len(set(keys)) == 6
@@ -57,3 +57,27 @@ def test_resume_continues_without_losing_or_repeating(tmp_path, town_scenario):
     resumed = _ended(out, records=True)
     assert [r["hash"] for r in again] == [r["hash"] for r in resumed]
     assert [r["score"] for r in again] == [r["score"] for r in resumed]
+
+
+def test_an_attempt_that_lost_ownership_of_its_job_stops(tmp_path, town_scenario):
+    """A job re-submitted elsewhere (its old client died) takes over; the old attempt stops at its next execution."""
+    from drivefuzz.job import SeedJob
+
+    seed = town_scenario.model_copy(update={"sim": SimOptions(time_limit=10.0)})
+    out = tmp_path / "out"
+    cfg = FuzzConfig(cycles=2, population=2, continue_after_finding=True, max_execs=1)
+    Campaign(out, [seed], cfg).run()
+    cfg.max_execs = None
+    Campaign(out, [seed], cfg).prepare(resume=True)  # a new run, as a client would start it
+    job = SeedJob(out, 0)
+    calls = []
+
+    def newer_attempt_takes_over():
+        calls.append(1)
+        if len(calls) == 2:  # call 1 is the check at the job's start, call 2 the one before its next execution
+            (out / "jobs" / "000" / "owner").write_text("another-host:1:abc")
+        return False
+
+    summary = job.run(stop=newer_attempt_takes_over)
+    assert summary["status"] == "superseded" and not (out / "jobs" / "000" / "summary.json").exists()
+    assert len(_ended(out)) == 2  # it finished the execution it had started, and no other

@@ -383,6 +383,19 @@ def test_lane_invasion_steer_left_over_a_solid_line():
     assert (m.kind, m.details["lane"], m.details["ego_lane"]) == ("solid_line", "B1C1_2", "B1C1_1")
 
 
+def test_lane_invasion_steer_left_at_town_speed():
+    # town/000 drives below 40 km/h, where a steering bias is corrected by the path tracker: the
+    # fault must still take the car out of its lane (it overrides the steering command)
+    from drivefuzz.sumofiles import load_scenario
+
+    sc = load_scenario(Path(NET).parent.parent / "seeds" / "town" / "000")
+    sc = sc.model_copy(update={"ads": AdsSpec(name="ego", options={"fault": "steer_left"})})
+    ex = run(sc, LaneInvasionOracle())
+    (m,) = ex.misbehaviors
+    assert m.kind == "opposite_lane"
+    assert m.time < 5.0
+
+
 def test_lane_invasion_onto_the_sidewalk():
     ex = run(scenario("A0B0_1", 10.0, "B0C0", 40.0, time_limit=30.0), LaneInvasionOracle(),
              ads=offset_ads(OffsetADS, -1.5))
