@@ -131,8 +131,14 @@ def _connect(where: str):
     except (OSError, TimeoutError, ValueError, AssertionError, KeyError) as exc:
         # OSError/TimeoutError: nobody listens; ValueError: a malformed address; AssertionError/KeyError:
         # a scheduler file that is not one
-        raise InvalidConfig("--scheduler", where, f"cannot reach the Dask scheduler ({type(exc).__name__}: {exc})",
-                            "the address a running 'dask scheduler' printed, or its --scheduler-file") from None
+        problem = f"cannot reach the Dask scheduler ({type(exc).__name__}: {exc})"
+    # the half-built Client must be collected now: collected later, inside another Client's start-up,
+    # its __del__ deadlocks on distributed's loop-runner lock
+    import gc
+
+    gc.collect()
+    raise InvalidConfig("--scheduler", where, problem,
+                        "the address a running 'dask scheduler' printed, or its --scheduler-file")
 
 
 def dask_setup(worker) -> None:

@@ -124,10 +124,23 @@ def test_mission_with_no_route(tmp_path):
 
 
 def test_unusable_scheduler(tmp_path):
+    """Each in its own process, as a user runs it (one Dask client per process)."""
+    import os
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+
     bad_json = tmp_path / "s.json"
     bad_json.write_text("{not json")
-    for where, needle in (("foo:bar", "cannot reach"), ("udp://127.0.0.1:1", "cannot reach"),
-                          (str(bad_json), "cannot reach"), (str(tmp_path / "none.json"), "no such scheduler file"),
-                          ("slurm", "drivefuzz campaign"), ("nowhere", "not a scheduler address")):
-        _one_line_error(*_invoke(["fuzz", str(TOWN), "--scheduler", where, "--max-execs", "1",
-                                  "-o", str(tmp_path / "o")]), "--scheduler", needle)
+    cases = (("foo:bar", "cannot reach"), ("udp://127.0.0.1:1", "cannot reach"), (str(bad_json), "cannot reach"),
+             (str(tmp_path / "none.json"), "no such scheduler file"), ("slurm", "drivefuzz campaign"),
+             ("nowhere", "not a scheduler address"))
+    env = dict(os.environ, PYTHONPATH=str(ROOT))
+    procs = [subprocess.Popen([sys.executable, "-m", "drivefuzz.cli", "fuzz", str(TOWN), "--scheduler", where,
+                               "--max-execs", "1", "-o", str(tmp_path / f"o{i}")],
+                              env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+             for i, (where, _) in enumerate(cases)]
+    for p, (where, needle) in zip(procs, cases):
+        out, err = p.communicate(timeout=120)
+        _one_line_error(p.returncode, out + err, None, "--scheduler", needle)
