@@ -326,8 +326,9 @@ def _print_summary(campaign, findings, out_dir) -> None:
 
     p = campaign.progress
     click.echo("", err=True)
-    click.echo(f"{p.execs} executions ({p.new_execs} in this run, {p.rate:.2f}/s), {len(findings)} finding(s); "
-               f"output in {out_dir}")
+    distinct = len({f.misbehavior.signature() for f in findings})
+    click.echo(f"{p.execs} executions ({p.new_execs} in this run, {p.rate:.2f}/s), {len(findings)} finding(s) "
+               f"({distinct} distinct: oracle, kind, actors, place); output in {out_dir}")
     if findings:
         click.echo(f"{'#':>3}  {'oracle/kind':<30} {'time':>7}  {'actors':<14} replay")
         for i, f in enumerate(findings):
