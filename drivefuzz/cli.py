@@ -8,6 +8,7 @@ internal errors were found); 130 aborted by a second Ctrl-C.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import signal
@@ -293,21 +294,30 @@ def _exit_code(findings, failed_jobs: bool) -> int:
     return EXIT_INTERNAL if findings or failed_jobs else EXIT_CLEAN
 
 
-def _run_campaign(campaign, resume: bool, where: str | None, jobs: int):
-    """Run a Campaign here or on Dask, stopping cleanly (everything saved) on the first Ctrl-C."""
-    import contextlib
-
+@contextlib.contextmanager
+def _stop_on_ctrl_c(campaigns):
+    """The first Ctrl-C asks every campaign to stop after its current executions; a second one aborts."""
     def _stop(signum, _frame):
-        campaign.stop_requested = True
+        for campaign in campaigns:
+            campaign.stop_requested = True
         click.echo("\nstopping after the current execution(s) (Ctrl-C again to abort)...", err=True)
         signal.signal(signal.SIGINT, signal.default_int_handler)
 
+    old = signal.signal(signal.SIGINT, _stop)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(ValueError):
+            signal.signal(signal.SIGINT, old)
+
+
+def _run_campaign(campaign, resume: bool, where: str | None, jobs: int):
+    """Run a Campaign here or on Dask, stopping cleanly (everything saved) on the first Ctrl-C."""
     def _started():
         click.echo(f"fuzzing {len(campaign.seeds)} seed(s) -> {campaign.out}"
                    + (f" on {jobs} local workers" if where == "local" else f" on {where}" if where else ""), err=True)
 
-    old = signal.signal(signal.SIGINT, _stop)
-    try:
+    with _stop_on_ctrl_c([campaign]):
         if where is None:
             _started()
             return campaign.run(resume=resume)
@@ -316,9 +326,6 @@ def _run_campaign(campaign, resume: bool, where: str | None, jobs: int):
         with dask_client(where, jobs=jobs) as client:
             _started()
             return campaign.run(resume=resume, client=client)
-    finally:
-        with contextlib.suppress(ValueError):
-            signal.signal(signal.SIGINT, old)
 
 
 def _print_summary(campaign, findings, out_dir) -> None:
@@ -428,23 +435,16 @@ def campaign(campaign_file, out, resume_dir):
         work.append((camp, camp.prepare(resume=(cell_dir / "manifest.json").exists())))
         campaigns.append(camp)
 
-    def _stop(signum, _frame):
-        for camp in campaigns:
-            camp.stop_requested = True
-        click.echo("\nstopping after the current executions (Ctrl-C again to abort)...", err=True)
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-
-    old = signal.signal(signal.SIGINT, _stop)
     where = spec.run.where
     click.echo(f"{len(campaigns)} cell(s) on {where} -> {out_dir}", err=True)
     aborted = False
     try:
-        with dask_client(where, jobs=spec.run.jobs, batch=spec.cluster if where in BATCH_SYSTEMS else None) as client:
+        with _stop_on_ctrl_c(campaigns), dask_client(where, jobs=spec.run.jobs,
+                                                     batch=spec.cluster if where in BATCH_SYSTEMS else None) as client:
             run_on_dask(client, work, max_running=spec.run.cells_at_once)
     except KeyboardInterrupt:
         aborted = True
     finally:
-        signal.signal(signal.SIGINT, old)
         for camp in campaigns:
             camp.finish()
         rows = results_table(out_dir, spec)

@@ -124,21 +124,18 @@ class _NetIndex:
         from shapely.ops import unary_union
 
         junctions, walks = [], []
-        for node in net.getNodes():
-            shape = node.getShape()
-            if len(shape) >= 3:
-                poly = Polygon([(p[0], p[1]) for p in shape]).buffer(0)
-                if poly.area > 0:
-                    junctions.append(poly)
+        def area(shape):
+            """The shape as a valid polygon, or None where it has no area."""
+            if len(shape) < 3:
+                return None
+            poly = Polygon([(p[0], p[1]) for p in shape]).buffer(0)
+            return poly if poly.area > 0 else None
+
+        junctions.extend(filter(None, (area(node.getShape()) for node in net.getNodes())))
         for e in net.getEdges(withInternal=True):
             func = e.getFunction()
             if func == "walkingarea":
-                for ln in e.getLanes():
-                    shape = ln.getShape()
-                    if len(shape) >= 3:
-                        poly = Polygon([(p[0], p[1]) for p in shape]).buffer(0)
-                        if poly.area > 0:
-                            walks.append(poly)
+                walks.extend(filter(None, (area(ln.getShape()) for ln in e.getLanes())))
             elif func == "internal":
                 # junction lanes for cars: drivable even where the junction shape is small
                 for ln in e.getLanes():
