@@ -133,7 +133,7 @@ class ADS(abc.ABC):
 
     @abc.abstractmethod
     def reset(self, mission: MissionInfo, roadmap) -> None:
-        """Called once before the first step. ``roadmap`` is a :class:`drivefuzz.roadmap.RoadMap`."""
+        """Called once before the first step. ``roadmap`` is a :class:`drivefuzz.scenario.roadmap.RoadMap`."""
 
     @abc.abstractmethod
     def step(self, obs: Observation) -> Control:

@@ -113,10 +113,10 @@ def main() -> None:
 @handle_errors
 def run(scenario, gui, ads_name, ads_option, trace_out, oracle_kv, no_oracle, config_file):
     """Run one SCENARIO (a scenario folder or its scenario.json) and print its outcome."""
-    from drivefuzz.execute import execute
-    from drivefuzz.quality import score_trace
+    from drivefuzz.sim.execute import execute
+    from drivefuzz.search.quality import score_trace
     from drivefuzz.scenario import AdsSpec
-    from drivefuzz.sumofiles import load_scenario
+    from drivefuzz.scenario.sumofiles import load_scenario
 
     config = load_config_file(config_file)
     sc = load_scenario(scenario)
@@ -150,13 +150,14 @@ def run(scenario, gui, ads_name, ads_option, trace_out, oracle_kv, no_oracle, co
 @handle_errors
 def seed(network, count, out, rng_seed, no_verify):
     """Write COUNT seed missions for NETWORK, each verified by a dry run of the reference ADS."""
-    from drivefuzz.roadmap import load_roadmap
-    from drivefuzz.seed import generate_seeds
-    from drivefuzz.sumofiles import write_scenario
+    from drivefuzz.scenario.roadmap import load_roadmap
+    from drivefuzz.scenario.seed import generate_seeds
+    from drivefuzz.scenario.sumofiles import write_scenario
+    from drivefuzz.sim.verify import dry_run
 
     rmap = load_roadmap(network)
     out = Path(out or Path("seeds") / rmap.name)
-    seeds = generate_seeds(network, count, rng_seed, verify_runs=not no_verify,
+    seeds = generate_seeds(network, count, rng_seed, verify=None if no_verify else dry_run,
                            log=lambda s: click.echo(f"  {s}", err=True))
     if not seeds:
         raise InvalidConfig(network, None, "no mission on this network passed the dry run",
@@ -212,9 +213,9 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
          ads_option, no_feedback, continue_after_finding, time_limit, jobs, scheduler, exec_timeout, no_isolation,
          oracle_kv, no_oracle, config_file):
     """Fuzz the ADS on NETWORK (a .net.xml). Exit 0: nothing found; 1: misbehaviour found; 2: bad input."""
-    from drivefuzz.fuzz import Campaign, FuzzConfig, load_campaign, parse_duration
-    from drivefuzz.mutate import MutationConfig
-    from drivefuzz.quality import QualityConfig
+    from drivefuzz.campaign.fuzz import Campaign, FuzzConfig, load_campaign, parse_duration
+    from drivefuzz.search.mutate import MutationConfig
+    from drivefuzz.search.quality import QualityConfig
     from drivefuzz.scenario import AdsSpec
 
     argv = ["drivefuzz", *sys.argv[1:]]
@@ -228,7 +229,7 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
     else:
         if not network:
             raise InvalidConfig("fuzz", "NETWORK", "missing", "a .net.xml file, or --resume OUT")
-        from drivefuzz.roadmap import load_roadmap
+        from drivefuzz.scenario.roadmap import load_roadmap
 
         load_roadmap(network)  # a bad network is the first thing to report
         config = load_config_file(config_file)
@@ -268,7 +269,7 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
                                 "a new directory, or --resume to continue it")
     if jobs is not None and jobs < 1:
         raise InvalidConfig("--jobs", str(jobs), "must be at least 1", "a positive integer")
-    from drivefuzz.cluster import BATCH_SYSTEMS
+    from drivefuzz.campaign.cluster import BATCH_SYSTEMS
 
     if scheduler in BATCH_SYSTEMS:
         raise InvalidConfig("--scheduler", scheduler, "batch systems are run by 'drivefuzz campaign'",
@@ -287,7 +288,7 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
 
 
 def _exit_code(findings, failed_jobs: bool) -> int:
-    from drivefuzz.simhost import INTERNAL_ERROR
+    from drivefuzz.sim.simhost import INTERNAL_ERROR
 
     if any(f.misbehavior.oracle != INTERNAL_ERROR for f in findings):
         return EXIT_FOUND
@@ -321,7 +322,7 @@ def _run_campaign(campaign, resume: bool, where: str | None, jobs: int):
         if where is None:
             _started()
             return campaign.run(resume=resume)
-        from drivefuzz.cluster import dask_client
+        from drivefuzz.campaign.cluster import dask_client
 
         with dask_client(where, jobs=jobs) as client:
             _started()
@@ -329,7 +330,7 @@ def _run_campaign(campaign, resume: bool, where: str | None, jobs: int):
 
 
 def _print_summary(campaign, findings, out_dir) -> None:
-    from drivefuzz.fuzz import replay_command
+    from drivefuzz.campaign.fuzz import replay_command
 
     p = campaign.progress
     click.echo("", err=True)
@@ -350,9 +351,10 @@ def _print_summary(campaign, findings, out_dir) -> None:
 
 
 def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
-    from drivefuzz.roadmap import load_roadmap
-    from drivefuzz.seed import generate_seeds, list_seeds
-    from drivefuzz.sumofiles import load_scenario, write_scenario
+    from drivefuzz.scenario.roadmap import load_roadmap
+    from drivefuzz.scenario.seed import generate_seeds, list_seeds
+    from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
+    from drivefuzz.sim.verify import dry_run
 
     rmap = load_roadmap(network)
     folder = Path(seeds_dir) if seeds_dir else Path("seeds") / rmap.name
@@ -366,7 +368,7 @@ def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
             seeds.append(sc)
         return seeds
     click.echo(f"no seeds in {folder}: generating and verifying {count} for {rmap.path.name}...", err=True)
-    seeds = generate_seeds(network, count, 0)
+    seeds = generate_seeds(network, count, 0, verify=dry_run)
     if not seeds:
         raise InvalidConfig(network, None, "could not generate a seed mission that the reference ADS completes",
                             "a network with connected passenger roads")
@@ -383,9 +385,9 @@ def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
 @handle_errors
 def campaign(campaign_file, out, resume_dir):
     """Run a batch: every cell of CAMPAIGN_FILE's matrix (networks x strategies x ADS x seeds) on Dask."""
-    from drivefuzz.batch import CampaignFile, cells, load_campaign_file, results_table, write_results
-    from drivefuzz.cluster import BATCH_SYSTEMS, dask_client
-    from drivefuzz.fuzz import Campaign, FuzzConfig, load_campaign, parse_duration, run_on_dask
+    from drivefuzz.campaign.batch import CampaignFile, cells, load_campaign_file, results_table, write_results
+    from drivefuzz.campaign.cluster import BATCH_SYSTEMS, dask_client
+    from drivefuzz.campaign.fuzz import Campaign, FuzzConfig, load_campaign, parse_duration, run_on_dask
     from drivefuzz.oracle import OracleSettings
     from drivefuzz.storage import atomic_write_json
 
@@ -404,7 +406,7 @@ def campaign(campaign_file, out, resume_dir):
             raise InvalidConfig("campaign", "CAMPAIGN_FILE", "missing", "a TOML file, or --resume DIR")
         spec = load_campaign_file(campaign_file)
         if spec.run.where in BATCH_SYSTEMS:
-            from drivefuzz.cluster import check_submit_command
+            from drivefuzz.campaign.cluster import check_submit_command
 
             check_submit_command(spec.run.where)
         settings = OracleSettings(settings=spec.oracles)
@@ -466,7 +468,7 @@ def _batch_progress(campaigns):
     show = _progress_printer()
 
     def update(_p):
-        from drivefuzz.fuzz import Progress
+        from drivefuzz.campaign.fuzz import Progress
 
         total = Progress(jobs_total=sum(c.progress.jobs_total for c in campaigns))
         total.started = min((c.progress.started for c in campaigns), default=total.started)
@@ -490,10 +492,10 @@ def _batch_progress(campaigns):
 @handle_errors
 def replay(finding, gui):
     """Run a FINDING directory again; 'reproduced' only if the same oracle fires at the same frame."""
-    from drivefuzz.execute import execute
+    from drivefuzz.sim.execute import execute
     from drivefuzz.oracle import Misbehavior, OracleSettings
-    from drivefuzz.simhost import FAILURE_KINDS
-    from drivefuzz.sumofiles import read_scenario
+    from drivefuzz.sim.simhost import FAILURE_KINDS
+    from drivefuzz.scenario.sumofiles import read_scenario
 
     folder = Path(finding)
     vpath = folder / "verdict.json"
@@ -507,7 +509,7 @@ def replay(finding, gui):
                             "a verdict.json written by drivefuzz fuzz") from None
     sc = read_scenario(folder)
     if want.oracle in FAILURE_KINDS:  # a crash, hang or plugin error: run it isolated again
-        from drivefuzz.simhost import SimHost
+        from drivefuzz.sim.simhost import SimHost
 
         with SimHost(timeout_s=verdict.get("exec_timeout_s", 300.0)) as host:
             out = host.execute(sc, verdict.get("oracles", {}))

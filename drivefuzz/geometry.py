@@ -1,6 +1,6 @@
 """Vectorised oriented-rectangle geometry: vehicle and pedestrian bodies as rectangles.
 
-Used by the driving-quality score (minimum ego-actor distance, :mod:`drivefuzz.quality`)
+Used by the driving-quality score (minimum ego-actor distance, :mod:`drivefuzz.search.quality`)
 and by the collision oracle.
 
 A body is ``(x, y, heading, length, width)``: ``x, y`` the *geometric centre* [m],

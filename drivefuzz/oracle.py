@@ -86,7 +86,7 @@ class RunContext:
     """Fixed facts about one execution, given to oracles at reset."""
 
     scenario: Any  # drivefuzz.scenario.Scenario
-    roadmap: Any  # drivefuzz.roadmap.RoadMap
+    roadmap: Any  # drivefuzz.scenario.roadmap.RoadMap
     route: tuple[str, ...]
     goal_xy: tuple[float, float]
     ego_length: float

@@ -20,7 +20,7 @@ import math
 from typing import Literal
 
 from drivefuzz.ads import ADS, Control, MissionInfo, Observation
-from drivefuzz.physics import VehicleParams
+from drivefuzz.sim.physics import VehicleParams
 
 from ego.actuation import PurePursuit, SpeedController
 from ego.perception import HEADING, LENGTH, PED, SPEED, WIDTH, X, Y, Perception

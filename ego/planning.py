@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from drivefuzz.roadmap import PASSENGER, RoadMap
+from drivefuzz.scenario.roadmap import PASSENGER, RoadMap
 
 
 #: Cell size [m] of a path's point grid: every path point within this distance of a query is found.

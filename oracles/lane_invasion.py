@@ -10,7 +10,7 @@ from typing import Sequence
 from pydantic import Field
 
 from drivefuzz.oracle import Frame, Misbehavior, Oracle, RunContext
-from drivefuzz.roadmap import PASSENGER, PEDESTRIAN
+from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN
 from oracles import wrap_angle
 
 #: Grid cell [m] of the lane-segment index.

@@ -9,7 +9,7 @@ from typing import Sequence
 from pydantic import Field
 
 from drivefuzz.oracle import Frame, LaneLink, Misbehavior, Oracle, RunContext
-from drivefuzz.roadmap import PASSENGER
+from drivefuzz.scenario.roadmap import PASSENGER
 from oracles import RED_STATES, YELLOW_STATES, kmh
 
 

@@ -13,7 +13,7 @@ TOWN = NETWORKS / "town.net.xml"
 
 @pytest.fixture(scope="session")
 def town():
-    from drivefuzz.roadmap import load_roadmap
+    from drivefuzz.scenario.roadmap import load_roadmap
 
     return load_roadmap(TOWN)
 

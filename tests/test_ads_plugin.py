@@ -62,8 +62,8 @@ def test_the_installed_plugin_is_found_through_its_entry_point(plugin_site, monk
 
 def test_the_installed_plugin_drives_a_seed(plugin_site, monkeypatch):
     from drivefuzz.ads import load_ads
-    from drivefuzz.execute import execute
-    from drivefuzz.sumofiles import read_scenario
+    from drivefuzz.sim.execute import execute
+    from drivefuzz.scenario.sumofiles import read_scenario
 
     monkeypatch.syspath_prepend(str(plugin_site))
     sc = read_scenario(SEED)

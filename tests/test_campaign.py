@@ -8,7 +8,7 @@ import json
 import pytest
 from click.testing import CliRunner
 
-from drivefuzz.batch import cells, load_campaign_file
+from drivefuzz.campaign.batch import cells, load_campaign_file
 from drivefuzz.cli import main
 from drivefuzz.errors import InvalidConfig
 
@@ -78,7 +78,7 @@ def test_bad_campaign_file_is_one_line_naming_the_field(tmp_path, text, field):
 
 
 def test_readme_slurm_example_makes_a_valid_job_script():
-    from drivefuzz.cluster import make_batch_cluster
+    from drivefuzz.campaign.cluster import make_batch_cluster
 
     example = ROOT / "examples" / "slurm-campaign.toml"
     assert example.read_text().strip() in (ROOT / "README.md").read_text()  # the README shows this very file

@@ -5,7 +5,7 @@ from __future__ import annotations
 from click.testing import CliRunner
 
 from drivefuzz.cli import main
-from drivefuzz.sumofiles import write_scenario
+from drivefuzz.scenario.sumofiles import write_scenario
 
 from conftest import TOWN
 

@@ -20,9 +20,9 @@ from pathlib import Path
 
 import pytest
 
-from drivefuzz.fuzz import Campaign, FuzzConfig
+from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
 from drivefuzz.scenario import AdsSpec, SimOptions
-from drivefuzz.sumofiles import write_scenario
+from drivefuzz.scenario.sumofiles import write_scenario
 
 from conftest import ROOT, TOWN
 
@@ -166,7 +166,7 @@ def test_local_cluster_jobs_2_survives_a_killed_worker(tmp_path, town_scenario, 
 
 
 def test_crashing_simulations_leave_the_dask_worker_alive(tmp_path, town_scenario):
-    from drivefuzz.cluster import dask_client
+    from drivefuzz.campaign.cluster import dask_client
 
     seeds = [sc.model_copy(update={"sim": SimOptions(time_limit=5.0)}) for sc in _seeds(town_scenario, 2)]
     cfg = FuzzConfig(cycles=1, population=2, continue_after_finding=True,
@@ -206,7 +206,7 @@ def test_ctrl_c_to_the_whole_terminal_group_stops_jobs_2_cleanly(tmp_path, town_
 
 
 def test_max_execs_is_exact_with_parallel_jobs(tmp_path, town_scenario):
-    from drivefuzz.cluster import dask_client
+    from drivefuzz.campaign.cluster import dask_client
 
     cfg = FuzzConfig(max_execs=3, **CFG)
     with dask_client("local", jobs=2) as client:

@@ -10,10 +10,10 @@ import pytest
 
 from drivefuzz import geometry
 from drivefuzz.errors import PluginError
-from drivefuzz.execute import execute
+from drivefuzz.sim.execute import execute
 from drivefuzz.oracle import Oracle, OracleSettings, Termination
 from drivefuzz.scenario import Actor, Mission, Puddle, Scenario, SimOptions, Weather
-from drivefuzz.trace import EGO_FLOAT_FIELDS, Trace
+from drivefuzz.sim.trace import EGO_FLOAT_FIELDS, Trace
 from ego.ads import ReferenceADS
 
 from conftest import NETWORKS, TOWN
@@ -76,10 +76,10 @@ def test_same_scenario_gives_identical_trace_in_two_processes(town, tmp_path):
     b = execute(sc).trace
     for name in EGO_FLOAT_FIELDS:
         assert np.array_equal(a[name], b[name], equal_nan=True), name
-    from drivefuzz.sumofiles import write_scenario
+    from drivefuzz.scenario.sumofiles import write_scenario
 
     write_scenario(sc, tmp_path / "sc")
-    code = ("import sys; from drivefuzz.sumofiles import read_scenario; from drivefuzz.execute import execute; "
+    code = ("import sys; from drivefuzz.scenario.sumofiles import read_scenario; from drivefuzz.sim.execute import execute; "
             "execute(read_scenario(sys.argv[1])).trace.save(sys.argv[2])")
     subprocess.run([sys.executable, "-c", code, str(tmp_path / "sc"), str(tmp_path / "tr")], check=True, timeout=120)
     c = Trace.load(tmp_path / "tr")

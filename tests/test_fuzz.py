@@ -8,7 +8,7 @@ import sqlite3
 from click.testing import CliRunner
 
 from drivefuzz.cli import main
-from drivefuzz.fuzz import Campaign, FuzzConfig
+from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
 from drivefuzz.scenario import AdsSpec, SimOptions
 
 
@@ -41,7 +41,7 @@ def test_resume_continues_without_losing_or_repeating(tmp_path, town_scenario):
     first = Campaign(out, [seed], FuzzConfig(max_execs=3, **cfg0)).run()
     keys_first = _ended(out)
     assert len(keys_first) == 3
-    from drivefuzz.fuzz import load_campaign
+    from drivefuzz.campaign.fuzz import load_campaign
 
     seeds, cfg, _ = load_campaign(out)
     cfg.max_execs = 3  # a resume is a new run with a budget of its own
@@ -61,7 +61,7 @@ def test_resume_continues_without_losing_or_repeating(tmp_path, town_scenario):
 
 def test_an_attempt_that_lost_ownership_of_its_job_stops(tmp_path, town_scenario):
     """A job re-submitted elsewhere (its old client died) takes over; the old attempt stops at its next execution."""
-    from drivefuzz.job import SeedJob
+    from drivefuzz.campaign.job import SeedJob
 
     seed = town_scenario.model_copy(update={"sim": SimOptions(time_limit=10.0)})
     out = tmp_path / "out"

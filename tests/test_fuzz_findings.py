@@ -14,9 +14,9 @@ import pytest
 from click.testing import CliRunner
 
 from drivefuzz.cli import main
-from drivefuzz.fuzz import Campaign, FuzzConfig
+from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
 from drivefuzz.scenario import AdsSpec, NavType
-from drivefuzz.sumofiles import read_scenario
+from drivefuzz.scenario.sumofiles import read_scenario
 
 from conftest import ROOT
 
@@ -65,8 +65,8 @@ def test_cross_traffic_linear_vehicle_hits_the_ego_from_the_side(town):
     """A linear vehicle on another approach, timed to the junction, runs into the clean ADS's side."""
     import random
 
-    from drivefuzz.execute import execute
-    from drivefuzz.mutate import MutationConfig, Mutator
+    from drivefuzz.sim.execute import execute
+    from drivefuzz.search.mutate import MutationConfig, Mutator
     from drivefuzz.oracle import OracleSettings
     from drivefuzz.scenario import ActorKind
 

@@ -12,10 +12,10 @@ import pytest
 from click.testing import CliRunner
 
 from drivefuzz.cli import main
-from drivefuzz.fuzz import Campaign, FuzzConfig
+from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
 from drivefuzz.scenario import AdsSpec, SimOptions
-from drivefuzz.simhost import CRASH, HANG, OK, PLUGIN_ERROR, SimHost
-from drivefuzz.sumofiles import write_scenario
+from drivefuzz.sim.simhost import CRASH, HANG, OK, PLUGIN_ERROR, SimHost
+from drivefuzz.scenario.sumofiles import write_scenario
 
 FAILING = "crashy_plugins:FailingADS"
 
@@ -66,8 +66,8 @@ def test_the_host_dies_with_its_parent_even_while_holding_the_gil(tmp_path, town
     write_scenario(_with_ads(town_scenario, failure="spin", at=0.5), folder)
     script = (
         "import sys\n"
-        "from drivefuzz.simhost import SimHost\n"
-        "from drivefuzz.sumofiles import load_scenario\n"
+        "from drivefuzz.sim.simhost import SimHost\n"
+        "from drivefuzz.scenario.sumofiles import load_scenario\n"
         f"sc = load_scenario({str(folder)!r})\n"
         "h = SimHost(timeout_s=None)\n"
         "h._start()\n"

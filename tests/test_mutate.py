@@ -7,9 +7,9 @@ import random
 
 import pytest
 
-from drivefuzz.mutate import STRATEGIES, MutationConfig, Mutator
+from drivefuzz.search.mutate import STRATEGIES, MutationConfig, Mutator
 from drivefuzz.scenario import ActorKind, NavType
-from drivefuzz.validate import validate
+from drivefuzz.scenario.validate import validate
 
 
 @pytest.mark.parametrize("strategy", STRATEGIES + ("mix",))
@@ -63,7 +63,7 @@ def test_linear_vehicles_are_placed_to_meet_the_ego(town):
     """Entropy's reckless drivers: behind the ego on its lane (rear), or on another approach to a junction
     of the ego's route with a passage through it (cross); within the speed limit and the separation."""
     from conftest import ROOT
-    from drivefuzz.sumofiles import read_scenario
+    from drivefuzz.scenario.sumofiles import read_scenario
 
     sc = read_scenario(ROOT / "seeds" / "town" / "005")
     route = Mutator(town)._route(sc)

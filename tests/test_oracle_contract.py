@@ -14,7 +14,7 @@ import pytest
 from pydantic import BaseModel
 
 from drivefuzz.errors import InvalidConfig
-from drivefuzz.execute import execute
+from drivefuzz.sim.execute import execute
 from drivefuzz.oracle import (
     Misbehavior,
     Oracle,

@@ -19,10 +19,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from drivefuzz.execute import execute
+from drivefuzz.sim.execute import execute
 from drivefuzz.geometry import rect_distance
 from drivefuzz.oracle import Frame, LaneLink, Misbehavior, Obstacle, RunContext, Termination
-from drivefuzz.roadmap import load_roadmap
+from drivefuzz.scenario.roadmap import load_roadmap
 from drivefuzz.scenario import Actor, AdsSpec, Mission, Scenario, SimOptions
 from drivefuzz.ads import Control
 from ego.ads import ReferenceADS
@@ -386,7 +386,7 @@ def test_lane_invasion_steer_left_over_a_solid_line():
 def test_lane_invasion_steer_left_at_town_speed():
     # town/000 drives below 40 km/h, where a steering bias is corrected by the path tracker: the
     # fault must still take the car out of its lane (it overrides the steering command)
-    from drivefuzz.sumofiles import load_scenario
+    from drivefuzz.scenario.sumofiles import load_scenario
 
     sc = load_scenario(Path(NET).parent.parent / "seeds" / "town" / "000")
     sc = sc.model_copy(update={"ads": AdsSpec(name="ego", options={"fault": "steer_left"})})

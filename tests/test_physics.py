@@ -1,4 +1,4 @@
-"""Tests of the vehicle physics (drivefuzz.physics): pure Python, fast."""
+"""Tests of the vehicle physics (drivefuzz.sim.physics): pure Python, fast."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from drivefuzz.physics import G, VehicleParams, VehiclePhysics, VehicleState, place_state
+from drivefuzz.sim.physics import G, VehicleParams, VehiclePhysics, VehicleState, place_state
 
 P = VehicleParams()
 

@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from pydantic import ValidationError
 
-from drivefuzz.quality import (
+from drivefuzz.search.quality import (
     EVENTS,
     G,
     SIGNAL_KEYS,
@@ -22,7 +22,7 @@ from drivefuzz.quality import (
     signals,
     understeer_index,
 )
-from drivefuzz.trace import trace_from_arrays
+from drivefuzz.sim.trace import trace_from_arrays
 
 DT = 0.05
 EGO_L, EGO_W = 4.6, 1.9
@@ -419,7 +419,7 @@ def test_random_traces_never_crash(rows):
 
 def test_md_pruning_matches_brute_force():
     from drivefuzz.geometry import rect_distance
-    from drivefuzz.quality import min_distance
+    from drivefuzz.search.quality import min_distance
 
     rng = np.random.default_rng(7)
     n = 120

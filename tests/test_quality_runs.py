@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from drivefuzz.execute import execute
-from drivefuzz.quality import score_trace
+from drivefuzz.sim.execute import execute
+from drivefuzz.search.quality import score_trace
 from drivefuzz.scenario import Puddle
-from drivefuzz.sumofiles import load_scenario
+from drivefuzz.scenario.sumofiles import load_scenario
 
 SEED = Path(__file__).resolve().parents[1] / "seeds" / "intersection" / "003"
 ICE = Puddle(x=-5.0, y=0.0, length=12.0, width=12.0, friction=0.1)

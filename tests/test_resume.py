@@ -13,7 +13,7 @@ import time
 import pytest
 
 from drivefuzz.scenario import SimOptions
-from drivefuzz.sumofiles import write_scenario
+from drivefuzz.scenario.sumofiles import write_scenario
 
 from conftest import ROOT, TOWN
 

@@ -12,7 +12,7 @@ import drivefuzz
 from drivefuzz.errors import InvalidScenario
 from drivefuzz.scenario import (Actor, ActorKind, Maneuver, ManeuverAction, Mission, NavType, Puddle, Scenario,
                                 SimOptions, Weather)
-from drivefuzz.sumofiles import read_scenario, write_scenario
+from drivefuzz.scenario.sumofiles import read_scenario, write_scenario
 
 from conftest import TOWN
 

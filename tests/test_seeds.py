@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import pytest
 
-from drivefuzz.execute import execute
+from drivefuzz.sim.execute import execute
 from drivefuzz.oracle import OracleSettings, Termination
-from drivefuzz.seed import list_seeds
-from drivefuzz.sumofiles import read_scenario
+from drivefuzz.scenario.seed import list_seeds
+from drivefuzz.scenario.sumofiles import read_scenario
 
 from conftest import ROOT
 

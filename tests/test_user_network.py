@@ -17,10 +17,11 @@ from click.testing import CliRunner
 
 import drivefuzz
 from drivefuzz.cli import main
-from drivefuzz.roadmap import PASSENGER, load_roadmap
-from drivefuzz.seed import doubles_back, generate_seeds, list_seeds, random_missions
-from drivefuzz.sumofiles import read_scenario
-from drivefuzz.validate import validate
+from drivefuzz.scenario.roadmap import PASSENGER, load_roadmap
+from drivefuzz.sim.verify import dry_run
+from drivefuzz.scenario.seed import doubles_back, generate_seeds, list_seeds, random_missions
+from drivefuzz.scenario.sumofiles import read_scenario
+from drivefuzz.scenario.validate import validate
 
 OSM = """<?xml version="1.0" encoding="UTF-8"?>
 <osm version="0.6" generator="drivefuzz-test">
@@ -93,7 +94,7 @@ def test_random_missions_end_on_a_network_without_any(tmp_path):
     rmap = load_roadmap(net)
     assert rmap.route("ab", "ba") is not None  # SUMO would drive it, with a U-turn at b
     assert list(random_missions(rmap, random.Random(0), str(net), max_draws=300)) == []
-    assert generate_seeds(net, 2, 0) == []
+    assert generate_seeds(net, 2, 0, verify=dry_run) == []
 
 
 def test_small_network_gets_shorter_missions_that_never_double_back(tmp_path):
@@ -115,7 +116,7 @@ def test_small_network_gets_shorter_missions_that_never_double_back(tmp_path):
 @pytest.mark.parametrize("which", ["grid", "osm"])
 def test_every_strategy_finds_room_on_a_user_network(user_networks, which):
     """No sidewalks (grid), single lanes, dead ends: every strategy still adds what it should, validly."""
-    from drivefuzz.mutate import STRATEGIES, Mutator
+    from drivefuzz.search.mutate import STRATEGIES, Mutator
 
     net = user_networks[which]
     rmap = load_roadmap(net)

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from drivefuzz.execute import execute
+from drivefuzz.sim.execute import execute
 from drivefuzz.oracle import Misbehavior, OracleSettings, available_oracles, parse_oracle_options
 from drivefuzz.scenario import Actor, Mission, Scenario, SimOptions
 from ego.ads import ReferenceADS

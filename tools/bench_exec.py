@@ -21,11 +21,11 @@ import time
 from pathlib import Path
 
 import drivefuzz  # noqa: F401  (sets SUMO_HOME)
-from drivefuzz.execute import _sumo_args, execute
+from drivefuzz.sim.execute import _sumo_args, execute
 from drivefuzz.oracle import OracleSettings
-from drivefuzz.roadmap import load_roadmap
+from drivefuzz.scenario.roadmap import load_roadmap
 from drivefuzz.scenario import Actor, Mission, Scenario, SimOptions
-from drivefuzz.sumofiles import write_scenario
+from drivefuzz.scenario.sumofiles import write_scenario
 
 NET = Path(__file__).resolve().parents[1] / "networks" / "town.net.xml"
 

@@ -72,9 +72,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", type=Path, help="keep the campaign directory here (default: a temporary one)")
     args = ap.parse_args(argv)
 
-    from drivefuzz.fuzz import Campaign, FuzzConfig
-    from drivefuzz.seed import list_seeds
-    from drivefuzz.sumofiles import read_scenario
+    from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
+    from drivefuzz.scenario.seed import list_seeds
+    from drivefuzz.scenario.sumofiles import read_scenario
 
     seeds = [read_scenario(p) for p in list_seeds(REPO / "seeds" / "town")[: args.seeds]]
     # spread the executions over the seeds: each seed's job gets about the same share

@@ -1,4 +1,4 @@
-"""Micro-benchmark of drivefuzz.physics: microseconds per ``VehiclePhysics.step()`` call.
+"""Micro-benchmark of drivefuzz.sim.physics: microseconds per ``VehiclePhysics.step()`` call.
 
 Usage: ``python tools/bench_physics.py [--dt 0.05] [--calls 20000] [--repeats 7]``
 
@@ -19,7 +19,7 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from drivefuzz.physics import VehicleParams, VehiclePhysics, place_state  # noqa: E402
+from drivefuzz.sim.physics import VehicleParams, VehiclePhysics, place_state  # noqa: E402
 
 
 def bench(speed: float, dt: float, calls: int, repeats: int) -> tuple[float, float]:

@@ -24,9 +24,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from drivefuzz.fuzz import Campaign, FuzzConfig  # noqa: E402
-from drivefuzz.seed import list_seeds  # noqa: E402
-from drivefuzz.sumofiles import load_scenario  # noqa: E402
+from drivefuzz.campaign.fuzz import Campaign, FuzzConfig  # noqa: E402
+from drivefuzz.scenario.seed import list_seeds  # noqa: E402
+from drivefuzz.scenario.sumofiles import load_scenario  # noqa: E402
 
 
 def run_point(jobs: int, seeds, budget: float, workdir: Path) -> dict[str, float]:
@@ -39,7 +39,7 @@ def run_point(jobs: int, seeds, budget: float, workdir: Path) -> dict[str, float
     if jobs == 1:
         campaign.run()
     else:
-        from drivefuzz.cluster import dask_client
+        from drivefuzz.campaign.cluster import dask_client
 
         with dask_client("local", jobs=jobs) as client:
             campaign.run(client=client)

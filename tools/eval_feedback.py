@@ -36,9 +36,9 @@ sys.path.insert(0, str(REPO))
 
 def run_one(seed_names: list[str], feedback: bool, rep: int, args: dict) -> dict:
     """One campaign; returns its counts (runs in a worker process with --jobs > 1)."""
-    from drivefuzz.fuzz import Campaign, FuzzConfig
-    from drivefuzz.simhost import FAILURE_KINDS
-    from drivefuzz.sumofiles import read_scenario
+    from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
+    from drivefuzz.sim.simhost import FAILURE_KINDS
+    from drivefuzz.scenario.sumofiles import read_scenario
 
     seeds = [read_scenario(REPO / "seeds" / "town" / name) for name in seed_names]
     cycles = -(-args["execs"] // (len(seeds) * args["population"]))  # every seed gets its share

@@ -69,7 +69,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from drivefuzz.roadmap import PASSENGER, PEDESTRIAN, load_roadmap  # noqa: E402
+from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN, load_roadmap  # noqa: E402
 from drivefuzz.scenario import Actor, ActorKind, AdsSpec, Mission, NavType, Scenario, SimOptions  # noqa: E402
 
 NETWORKS = ("highway", "interchange", "intersection", "roundabout", "town")
@@ -102,8 +102,8 @@ class Case:
 
 # ============================================================================ scenario drawing
 def committed_seeds() -> dict[str, list[Scenario]]:
-    from drivefuzz.seed import list_seeds
-    from drivefuzz.sumofiles import read_scenario
+    from drivefuzz.scenario.seed import list_seeds
+    from drivefuzz.scenario.sumofiles import read_scenario
 
     return {net: [read_scenario(p) for p in list_seeds(ROOT / "seeds" / net)] for net in NETWORKS}
 
@@ -139,7 +139,7 @@ class Drawer:
             k = rng.randrange(len(self.seeds[net]))
             sc, origin = self.seeds[net][k], f"seeds/{net}/{k:03d}"
         else:
-            from drivefuzz.seed import random_missions
+            from drivefuzz.scenario.seed import random_missions
 
             gen = self._random_missions.get(net)
             if gen is None:
@@ -166,7 +166,7 @@ class Drawer:
             return None
         lanes = [l.getID() for l in rmap.edge(start).getLanes()
                  if l.allows(PASSENGER) and any(c.getTo().getID() == route[1] for c in l.getOutgoing())]
-        from drivefuzz.seed import time_limit_for
+        from drivefuzz.scenario.seed import time_limit_for
 
         return Scenario(network=str(rmap.path), ads=AdsSpec(name="ego"), seed=rng.randrange(2**31),
                         mission=Mission(start_lane=rng.choice(lanes) if lanes else rmap.drive_lane(start),
@@ -175,7 +175,7 @@ class Drawer:
 
     def walkers(self, sc: Scenario, net: str, k: int) -> Scenario:
         """Up to ``k`` lawful walkers on the sidewalks along the route (they stay off the road)."""
-        from drivefuzz.mutate import Mutator
+        from drivefuzz.search.mutate import Mutator
 
         m = Mutator(self.rmaps[net])
         for _ in range(k):
@@ -285,7 +285,7 @@ class Drawer:
 
     def traffic(self) -> tuple[Scenario, dict]:
         """A committed seed with 1-6 lawful actors (the mutator's congestion strategy)."""
-        from drivefuzz.mutate import Mutator
+        from drivefuzz.search.mutate import Mutator
 
         rng = self.rng
         net = rng.choice(NETWORKS)
@@ -654,7 +654,7 @@ _ORACLES = None
 def run_case(case: Case) -> dict[str, Any]:
     """Runs in a worker process (libsumo: one simulation per process)."""
     from drivefuzz.ads import load_ads
-    from drivefuzz.execute import execute
+    from drivefuzz.sim.execute import execute
     from drivefuzz.oracle import OracleSettings
 
     sc = case.scenario
@@ -738,7 +738,7 @@ def gt_events(gt: dict[str, Any]) -> list[str]:
 
 
 def save_case(folder: Path, case: Case, tag: str) -> Path:
-    from drivefuzz.sumofiles import write_scenario
+    from drivefuzz.scenario.sumofiles import write_scenario
 
     out = folder / f"{case.row}-{case.index:03d}-{tag}"
     write_scenario(case.scenario, out)

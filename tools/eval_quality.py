@@ -1,6 +1,6 @@
 """Validate the understeer and oversteer detectors on real runs (the paper's appendix figures).
 
-Two experiments, each run through :func:`drivefuzz.execute.execute` with the reference ADS
+Two experiments, each run through :func:`drivefuzz.sim.execute.execute` with the reference ADS
 together with a *dry twin* (the same scenario without the puddle):
 
 * **understeer** (paper: f:usfig / f:usgraph): a low-friction puddle covers the junction where
@@ -47,11 +47,11 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
-from drivefuzz.execute import Execution, execute  # noqa: E402
-from drivefuzz.physics import VehicleParams  # noqa: E402
-from drivefuzz.quality import QualityConfig, score_trace, signals  # noqa: E402
+from drivefuzz.sim.execute import Execution, execute  # noqa: E402
+from drivefuzz.sim.physics import VehicleParams  # noqa: E402
+from drivefuzz.search.quality import QualityConfig, score_trace, signals  # noqa: E402
 from drivefuzz.scenario import Puddle, Scenario  # noqa: E402
-from drivefuzz.sumofiles import load_scenario  # noqa: E402
+from drivefuzz.scenario.sumofiles import load_scenario  # noqa: E402
 
 BASE_SEED = REPO / "seeds" / "intersection" / "003"  # WC -> CN: a left turn at a signalised junction
 TIMING_SEED = REPO / "seeds" / "town" / "000"  # ~1,200 frames of clean driving
@@ -78,7 +78,7 @@ def axle_saturation(trace, params: VehicleParams | None = None) -> dict[str, np.
     """Per frame: slip angle of each axle [rad] and its ratio to the peak-force slip angle.
 
     Peak of ``sin(C atan(B a))`` is at ``B a = tan(pi / (2 C))`` with ``B = k / (C mu_eff)``
-    (drivefuzz.physics), so ``a_peak = tan(pi/(2C)) C mu grip / k``. Load transfer is ignored
+    (drivefuzz.sim.physics), so ``a_peak = tan(pi/(2C)) C mu grip / k``. Load transfer is ignored
     (a few per cent).
     """
     p = params or VehicleParams()

@@ -12,7 +12,7 @@ import math
 from pydantic import Field
 
 from drivefuzz.ads import ADS, Control, MissionInfo, Observation
-from drivefuzz.physics import VehicleParams
+from drivefuzz.sim.physics import VehicleParams
 
 MAX_WHEEL_ANGLE = VehicleParams().max_road_wheel_angle  # [rad] the car's full lock
 

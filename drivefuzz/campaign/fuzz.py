@@ -1,9 +1,9 @@
 """A fuzz campaign: its output directory, its seed jobs, and the index of every execution.
 
 The campaign process (the client) owns the directory's manifest and its SQLite
-index; the seed jobs (:mod:`drivefuzz.job`, the paper's Algorithm 1 for one seed)
+index; the seed jobs (:mod:`drivefuzz.campaign.job`, the paper's Algorithm 1 for one seed)
 write everything else themselves. With ``--jobs 1`` the jobs run one after another
-in this process; otherwise they run at once on Dask (:mod:`drivefuzz.cluster`),
+in this process; otherwise they run at once on Dask (:mod:`drivefuzz.campaign.cluster`),
 one simulation per worker process. Either way the client follows the jobs'
 journals to keep the index and the progress display current, and stops the jobs
 by creating ``STOP`` when the budget runs out or the user presses Ctrl-C.
@@ -12,7 +12,7 @@ Output directory (a person opens it without drivefuzz)::
 
     manifest.json           version, command line, configuration, campaign seed, seed list
     seeds/NNN/              the seed scenarios (SUMO files + scenario.json)
-    jobs/NNN/               each seed job's journal, checkpoint and summary (see drivefuzz.job)
+    jobs/NNN/               each seed job's journal, checkpoint and summary (see drivefuzz.campaign.job)
     index.sqlite            one row per execution; written only by the client, rebuilt from the
                             journals on --resume (it is derived data: SQLite must not be shared over NFS)
     corpus/<hash>/          every successor scenario
@@ -33,13 +33,12 @@ from typing import Any, Callable, Sequence
 
 import drivefuzz
 from drivefuzz.errors import InvalidConfig
-from drivefuzz.job import STOP_FILE, SeedJob, job_dir, run_seed_job
-from drivefuzz.mutate import MutationConfig
+from drivefuzz.campaign.config import FuzzConfig  # noqa: F401  (re-exported)
+from drivefuzz.campaign.job import STOP_FILE, SeedJob, job_dir, run_seed_job
 from drivefuzz.oracle import Misbehavior, OracleSettings
-from drivefuzz.quality import QualityConfig
 from drivefuzz.scenario import AdsSpec, Scenario
 from drivefuzz.storage import atomic_write_json
-from drivefuzz.sumofiles import load_scenario, write_scenario
+from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS executions (
@@ -59,47 +58,6 @@ COLUMNS = (("key", "key"), ("seed_index", "seed_index"), ("cycle", "cycle"), ("m
            ("pid", "pid"))
 _INSERT = (f"INSERT OR IGNORE INTO executions ({', '.join(c for c, _ in COLUMNS)}) "
            f"VALUES ({', '.join('?' * len(COLUMNS))})")
-
-
-@dataclass
-class FuzzConfig:
-    cycles: int = 10
-    population: int = 8
-    strategy: str = "all"
-    seed: int = 0
-    budget_s: float | None = None
-    max_execs: int | None = None
-    feedback: bool = True
-    continue_after_finding: bool = False
-    ads: AdsSpec = field(default_factory=AdsSpec)
-    oracles: OracleSettings = field(default_factory=OracleSettings)
-    mutation: MutationConfig = field(default_factory=MutationConfig)
-    quality: QualityConfig = field(default_factory=QualityConfig)
-    time_limit: float | None = None  # override the seeds' simulated time limit [s]
-    isolate: bool = True  # run executions in a simulation-host child (crash isolation)
-    exec_timeout_s: float = 300.0  # [s] wall clock; longer is a 'hang' finding
-
-    def to_json(self) -> dict[str, Any]:
-        return {
-            "cycles": self.cycles, "population": self.population, "strategy": self.strategy, "seed": self.seed,
-            "budget_s": self.budget_s, "max_execs": self.max_execs, "feedback": self.feedback,
-            "continue_after_finding": self.continue_after_finding, "ads": self.ads.model_dump(mode="json"),
-            "oracles": self.oracles.settings, "mutation": self.mutation.model_dump(mode="json"),
-            "quality": self.quality.model_dump(mode="json"), "time_limit": self.time_limit,
-            "isolate": self.isolate, "exec_timeout_s": self.exec_timeout_s,
-        }
-
-    @classmethod
-    def from_json(cls, d: dict[str, Any]) -> "FuzzConfig":
-        return cls(
-            cycles=d["cycles"], population=d["population"], strategy=d["strategy"], seed=d["seed"],
-            budget_s=d.get("budget_s"), max_execs=d.get("max_execs"), feedback=d.get("feedback", True),
-            continue_after_finding=d.get("continue_after_finding", False),
-            ads=AdsSpec.model_validate(d.get("ads", {})), oracles=OracleSettings(settings=d.get("oracles", {})),
-            mutation=MutationConfig.model_validate(d.get("mutation", {})),
-            quality=QualityConfig.model_validate(d.get("quality", {})), time_limit=d.get("time_limit"),
-            isolate=d.get("isolate", True), exec_timeout_s=d.get("exec_timeout_s", 300.0),
-        )
 
 
 @dataclass

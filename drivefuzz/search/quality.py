@@ -504,7 +504,7 @@ def min_distance(trace) -> tuple[float | None, int | None, str | None]:
 
 # ---------------------------------------------------------------------------- score
 def score_trace(trace, config: QualityConfig | None = None) -> QualityScore:
-    """Score one execution's :class:`~drivefuzz.trace.Trace` (higher = smoother, safer driving)."""
+    """Score one execution's :class:`~drivefuzz.sim.trace.Trace` (higher = smoother, safer driving)."""
     cfg = config or QualityConfig()
     if trace.n_frames == 0:
         return QualityScore(0, 0, 0, 0, 0, None, 0.0, 0.0, {e: [] for e in EVENTS}, None, None, 0)

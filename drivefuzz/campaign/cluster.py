@@ -102,7 +102,7 @@ def dask_client(where: str = "local", jobs: int = 2, batch: BatchSpec | None = N
 
     with dask.config.set(DASK_SETTINGS), contextlib.ExitStack() as stack:
         if where == "local":
-            stack.enter_context(dask.config.set({"distributed.worker.preload": ["drivefuzz.cluster"]}))
+            stack.enter_context(dask.config.set({"distributed.worker.preload": ["drivefuzz.campaign.cluster"]}))
             cluster = stack.enter_context(LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
                                                        dashboard_address=None, silence_logs=40))
             client = stack.enter_context(Client(cluster))

@@ -1,7 +1,7 @@
 """The Scenario: everything one execution needs, as validated pydantic models.
 
 A scenario is the unit the mutator rewrites, the executor runs and a finding
-stores. It is written as SUMO files by :mod:`drivefuzz.sumofiles` (actors in a
+stores. It is written as SUMO files by :mod:`drivefuzz.scenario.sumofiles` (actors in a
 route file, puddles and weather in an additional file, the rest in a small JSON
 manifest) and read back losslessly.
 
@@ -14,6 +14,7 @@ front bumper.
 from __future__ import annotations
 
 import hashlib
+import math
 import json
 from enum import Enum
 from pathlib import Path
@@ -22,6 +23,9 @@ from typing import Literal, Union
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 SCHEMA_VERSION = 1
+#: [m] body of the ego car that drivefuzz's physics simulates (every ADS drives the same car)
+EGO_LENGTH = 4.6
+EGO_WIDTH = 1.9  #: [m]
 
 OptionValue = Union[bool, int, float, str]
 
@@ -107,6 +111,15 @@ class Puddle(_Model):
     width: float = Field(gt=0.0, description="[m]")
     rotation: float = Field(default=0.0, description="[rad] ENU, counter-clockwise")
     friction: float = Field(gt=0.0, le=2.0, description="coefficient mu in (0, 2]")
+
+    def corners(self) -> list[tuple[float, float]]:
+        """The rectangle's four corners [m], counter-clockwise from the front left."""
+        c, s = math.cos(self.rotation), math.sin(self.rotation)
+        out = []
+        for dx, dy in ((0.5, 0.5), (-0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)):
+            lx, ly = dx * self.length, dy * self.width
+            out.append((self.x + c * lx - s * ly, self.y + s * lx + c * ly))
+        return out
 
 
 class Weather(_Model):

@@ -41,7 +41,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 from shapely.geometry import LineString, Point
 
-from drivefuzz.roadmap import PASSENGER, PEDESTRIAN, RoadMap
+from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN, RoadMap
 from drivefuzz.scenario import (
     Actor,
     ActorKind,

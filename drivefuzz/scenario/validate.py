@@ -11,7 +11,7 @@ import math
 from shapely.geometry import LineString, Polygon
 
 from drivefuzz.errors import InvalidScenario
-from drivefuzz.roadmap import PASSENGER, PEDESTRIAN, RoadMap
+from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN, RoadMap
 from drivefuzz.scenario import ActorKind, Puddle, Scenario, lane_edge
 
 
@@ -83,9 +83,7 @@ def validate(scenario: Scenario, rmap: RoadMap, source: str) -> tuple[str, ...]:
 
 
 def puddle_polygon(p: Puddle) -> Polygon:
-    from drivefuzz.sumofiles import puddle_corners
-
-    return Polygon(puddle_corners(p))
+    return Polygon(p.corners())
 
 
 def puddle_lanes(p: Puddle, rmap: RoadMap) -> list[str]:

@@ -8,7 +8,7 @@ the job that Dask starts again elsewhere continues from its journal.
 
 For each of ``cycles`` cycles, ``generate`` adds one actor or puddle to the
 current scenario, then ``population`` mutants are executed. A mutant that makes
-an oracle fire (or crashes, hangs or breaks a plugin, see :mod:`drivefuzz.simhost`)
+an oracle fire (or crashes, hangs or breaks a plugin, see :mod:`drivefuzz.sim.simhost`)
 is a finding, which ends the seed's campaign unless ``continue_after_finding``.
 Otherwise the mutant with the lowest driving-quality score becomes the next
 scenario (a random one with ``feedback=False``, the paper's baseline).
@@ -47,9 +47,10 @@ from pathlib import Path
 from typing import Any, Callable
 
 import drivefuzz
+from drivefuzz.campaign.config import FuzzConfig
 from drivefuzz.oracle import Misbehavior
 from drivefuzz.storage import atomic_dir, atomic_write_json, atomic_write_text
-from drivefuzz.sumofiles import load_scenario, write_scenario
+from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
 
 STOP_FILE = "STOP"
 
@@ -91,8 +92,6 @@ class SeedJob:
     """The campaign of one seed inside the campaign directory ``out``."""
 
     def __init__(self, out: str | os.PathLike, seed_index: int):
-        from drivefuzz.fuzz import FuzzConfig
-
         self.out = Path(out)
         self.si = seed_index
         self.dir = job_dir(self.out, seed_index)
@@ -202,9 +201,9 @@ class SeedJob:
         return summary
 
     def _loop(self, done: dict[str, dict], should_stop, on_record) -> str:
-        from drivefuzz.mutate import Mutator
-        from drivefuzz.roadmap import load_roadmap
-        from drivefuzz.simhost import OK
+        from drivefuzz.search.mutate import Mutator
+        from drivefuzz.scenario.roadmap import load_roadmap
+        from drivefuzz.sim.simhost import OK
 
         cfg = self.cfg
         seed_sc = self.seed
@@ -264,7 +263,7 @@ class SeedJob:
                         rel = self._save_finding(child, list(ex.misbehaviors), key, ex.trace, ex.termination.value)
                         rec.update(verdict=f"{m.oracle}/{m.kind}", finding=rel)
                     else:
-                        from drivefuzz.quality import score_trace
+                        from drivefuzz.search.quality import score_trace
 
                         t0 = time.perf_counter()
                         q = score_trace(ex.trace, cfg.quality)
@@ -304,7 +303,7 @@ def _host_for_this_thread(timeout_s: float):
     import atexit
     import threading
 
-    from drivefuzz.simhost import SimHost
+    from drivefuzz.sim.simhost import SimHost
 
     tid = threading.get_ident()
     host = _HOSTS.get(tid)
@@ -327,8 +326,8 @@ class _Runner:
         if self.host is not None:
             return self.host.execute(scenario, self.cfg.oracles.settings)
         from drivefuzz.errors import PluginError
-        from drivefuzz.execute import execute
-        from drivefuzz.simhost import OK, PLUGIN_ERROR, Outcome
+        from drivefuzz.sim.execute import execute
+        from drivefuzz.sim.simhost import OK, PLUGIN_ERROR, Outcome
 
         t0 = time.monotonic()
         try:

@@ -68,6 +68,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from drivefuzz.scenario.model import EGO_LENGTH, EGO_WIDTH
+
 __all__ = ["G", "VehicleParams", "VehicleState", "VehiclePhysics", "place_state"]
 
 G = 9.81  # [m/s^2]
@@ -90,8 +92,8 @@ class VehicleParams:
     ~8.6 m/s^2 on a dry road.
     """
 
-    length: float = 4.6  # [m] body
-    width: float = 1.9  # [m]
+    length: float = EGO_LENGTH  # [m] body
+    width: float = EGO_WIDTH  # [m]
     wheelbase: float = 2.8  # [m]
     cg_to_front: float = 1.3  # [m] lf: CG to front axle; lr = wheelbase - lf
     front_overhang: float = 0.95  # [m] front axle to front bumper

@@ -26,7 +26,9 @@ from typing import Any
 from pydantic import ValidationError
 
 from drivefuzz.errors import InvalidScenario
-from drivefuzz.scenario import (
+from drivefuzz.scenario.model import (
+    EGO_LENGTH,
+    EGO_WIDTH,
     SCHEMA_VERSION,
     Actor,
     ActorKind,
@@ -91,28 +93,15 @@ def _params(elem: ET.Element) -> dict[str, str]:
     return {p.get("key"): p.get("value") for p in elem.findall("param")}
 
 
-def puddle_corners(p: Puddle) -> list[tuple[float, float]]:
-    c, s = math.cos(p.rotation), math.sin(p.rotation)
-    out = []
-    for dx, dy in ((0.5, 0.5), (-0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)):
-        lx, ly = dx * p.length, dy * p.width
-        out.append((p.x + c * lx - s * ly, p.y + s * lx + c * ly))
-    return out
-
-
 # ---------------------------------------------------------------- writing
-def routes_xml(scenario: Scenario, route_edges: tuple[str, ...], ego=None) -> str:
-    """The route file; ``ego`` is the physics' VehicleParams (for the ego vType's size)."""
-    if ego is None:
-        from drivefuzz.physics import VehicleParams
-
-        ego = VehicleParams()
+def routes_xml(scenario: Scenario, route_edges: tuple[str, ...]) -> str:
+    """The route file (the ego's vType has the size of the physics' car, :data:`EGO_LENGTH` x :data:`EGO_WIDTH`)."""
     root = ET.Element("routes")
     for vid, attrs in VTYPES.items():
         vt = ET.SubElement(root, "vType", id=vid, **attrs)
         if vid == EGO_TYPE:
-            vt.set("length", _f(ego.length))
-            vt.set("width", _f(ego.width))
+            vt.set("length", _f(EGO_LENGTH))
+            vt.set("width", _f(EGO_WIDTH))
             vt.set("minGap", "1.0")
     m = scenario.mission
     ego_el = ET.Element("vehicle", id=EGO_ID, type=EGO_TYPE, depart="0.00",
@@ -170,7 +159,7 @@ def _actor_element(a: Actor) -> ET.Element:
 def additional_xml(scenario: Scenario, puddle_lanes: list[list[str]], weather_xy: tuple[float, float]) -> str:
     root = ET.Element("additional")
     for i, p in enumerate(scenario.puddles):
-        shape = " ".join(f"{x:.3f},{y:.3f}" for x, y in puddle_corners(p))
+        shape = " ".join(f"{x:.3f},{y:.3f}" for x, y in p.corners())
         poly = ET.SubElement(root, "poly", id=f"puddle_{i}", type="drivefuzz.puddle", color="0,90,200",
                              fill="1", layer="1", shape=shape)
         for key in ("x", "y", "length", "width", "rotation", "friction"):
@@ -210,8 +199,8 @@ def write_scenario(scenario: Scenario, folder: str | os.PathLike, *, base: str |
     ``durable=False`` skips the atomic, fsync'd writes, for a scratch folder that
     is deleted after the run (the executor's; about 4 ms per execution).
     """
-    from drivefuzz.roadmap import load_roadmap
-    from drivefuzz.validate import puddle_lanes, validate
+    from drivefuzz.scenario.roadmap import load_roadmap
+    from drivefuzz.scenario.validate import puddle_lanes, validate
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -296,8 +285,8 @@ def read_scenario(path: str | os.PathLike, *, validate_network: bool = True) -> 
     except ValidationError as exc:
         raise _pydantic_error(src, exc) from None
     if validate_network:
-        from drivefuzz.roadmap import load_roadmap
-        from drivefuzz.validate import validate
+        from drivefuzz.scenario.roadmap import load_roadmap
+        from drivefuzz.scenario.validate import validate
 
         from drivefuzz.errors import InvalidNetwork
 
@@ -385,8 +374,8 @@ def load_scenario(path: str | os.PathLike) -> Scenario:
             raise _pydantic_error(str(path), exc) from None
         net = scenario.network_path(path.parent)
         scenario = scenario.model_copy(update={"network": str(net.resolve())})
-        from drivefuzz.roadmap import load_roadmap
-        from drivefuzz.validate import validate
+        from drivefuzz.scenario.roadmap import load_roadmap
+        from drivefuzz.scenario.validate import validate
 
         validate(scenario, load_roadmap(net), source=str(path))
         return scenario

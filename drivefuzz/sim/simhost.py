@@ -5,7 +5,7 @@ native code an ADS plugin loads) would kill whoever called it: a campaign, or a
 Dask worker. The fuzz loop therefore sends each execution to a child process
 and turns whatever goes wrong there into an :class:`Outcome`:
 
-- ``ok``: the child returned the :class:`~drivefuzz.execute.Execution`;
+- ``ok``: the child returned the :class:`~drivefuzz.sim.execute.Execution`;
 - ``simulator-crash``: the child died (a signal such as SIGSEGV/SIGABRT, or an exit);
 - ``hang``: no answer within the wall-clock limit (the child is killed);
 - ``plugin-error``: an ADS or oracle plugin raised (:class:`~drivefuzz.errors.PluginError`);
@@ -54,7 +54,7 @@ class ProtocolError(Exception):
 @dataclass
 class Outcome:
     status: str  # one of OK, CRASH, HANG, PLUGIN_ERROR, INTERNAL_ERROR
-    execution: Any = None  # drivefuzz.execute.Execution when status == OK
+    execution: Any = None  # drivefuzz.sim.execute.Execution when status == OK
     detail: str = ""  # one line: the signal, the exception, the limit
     error_type: str = ""  # exception class name, or signal name
     traceback: str = ""
@@ -131,7 +131,7 @@ class SimHost:
         # plugins importable in the parent (installed, or on a test's sys.path) must be importable here too
         env["PYTHONPATH"] = self._path = self._pythonpath()
         # its own session: a terminal's Ctrl-C does not reach it, and killpg also ends what a plugin started
-        self.proc = subprocess.Popen([sys.executable, "-m", "drivefuzz.simhost"], stdin=subprocess.PIPE,
+        self.proc = subprocess.Popen([sys.executable, "-m", "drivefuzz.sim.simhost"], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, env=env, close_fds=True, start_new_session=True)
         self.starts += 1
         try:
@@ -140,7 +140,7 @@ class SimHost:
             ready = None
         if ready != ("ready",):
             self._kill()
-            raise SimulationError(f"the simulation host did not start ({sys.executable} -m drivefuzz.simhost)")
+            raise SimulationError(f"the simulation host did not start ({sys.executable} -m drivefuzz.sim.simhost)")
 
     def _kill(self) -> None:
         if self.proc is None:
@@ -245,7 +245,7 @@ def _serve() -> None:
     os.close(devnull)
     sys.stdout = sys.stderr
 
-    from drivefuzz.execute import execute
+    from drivefuzz.sim.execute import execute
     from drivefuzz.oracle import OracleSettings
     from drivefuzz.scenario import Scenario
 

@@ -54,12 +54,12 @@ import drivefuzz
 from drivefuzz.ads import ADS, EgoState, MissionInfo, Observation, TrafficLightState, load_ads
 from drivefuzz.errors import PluginError, SimulationError
 from drivefuzz.oracle import Frame, LaneLink, Misbehavior, Oracle, RunContext, Termination
-from drivefuzz.physics import VehicleParams, VehiclePhysics, place_state
-from drivefuzz.roadmap import load_roadmap
+from drivefuzz.sim.physics import VehicleParams, VehiclePhysics, place_state
+from drivefuzz.scenario.roadmap import load_roadmap
 from drivefuzz.scenario import Scenario
-from drivefuzz.sumofiles import ADDITIONAL, EGO_ID, ROUTES, write_scenario
-from drivefuzz.trace import Recorder, Trace
-from drivefuzz.world import (
+from drivefuzz.scenario.sumofiles import ADDITIONAL, EGO_ID, ROUTES, write_scenario
+from drivefuzz.sim.trace import Recorder, Trace
+from drivefuzz.sim.world import (
     ActorDriver,
     Actors,
     Puddles,

@@ -22,7 +22,7 @@ per cell. ``drivefuzz campaign --resume DIR`` continues it. Example::
     jobs = 2                  # local workers (where = "local")
     cells_at_once = 4         # cells running at the same time (default: all)
 
-    [cluster]                 # batch systems only: see drivefuzz.cluster.BatchSpec
+    [cluster]                 # batch systems only: see drivefuzz.campaign.cluster.BatchSpec
     queue = "normal"
     cores = 16
     memory = "32GB"
@@ -46,10 +46,10 @@ from typing import Any
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from drivefuzz.cluster import BATCH_SYSTEMS, BatchSpec
+from drivefuzz.campaign.cluster import BATCH_SYSTEMS, BatchSpec
 from drivefuzz.errors import InvalidConfig
-from drivefuzz.mutate import MutationConfig
-from drivefuzz.quality import QualityConfig
+from drivefuzz.search.mutate import MutationConfig
+from drivefuzz.search.quality import QualityConfig
 from drivefuzz.scenario import AdsSpec
 
 STRATEGIES = ("all", "congestion", "entropy", "instability", "maneuver", "mix")
@@ -124,7 +124,7 @@ def load_campaign_file(path: str | Path) -> CampaignFile:
         nets.append(str(p.resolve()))
     spec.matrix.networks = nets
     from drivefuzz.ads import load_ads
-    from drivefuzz.fuzz import parse_duration
+    from drivefuzz.campaign.fuzz import parse_duration
 
     parse_duration(spec.campaign.budget, source=f"{path}: campaign.budget")
     for ads in spec.matrix.ads:  # an unknown ADS or option is a mistake in this file, not a finding
@@ -167,7 +167,7 @@ def results_table(out: Path, spec: CampaignFile) -> list[dict[str, Any]]:
             db = sqlite3.connect(d / "index.sqlite")
             row["execs"] = db.execute("SELECT COUNT(*) FROM executions").fetchone()[0]
             db.close()
-            from drivefuzz.fuzz import load_finding
+            from drivefuzz.campaign.fuzz import load_finding
 
             found = [load_finding(f) for f in sorted((d / "findings").iterdir())
                      if not f.name.startswith(".") and (f / "verdict.json").exists()]  # not half-written ones

@@ -1,6 +1,6 @@
 """The world around the ego during an execution: actors' behaviour and poses, puddles, weather, obstacles.
 
-Used only by :mod:`drivefuzz.execute`, which passes in the simulation module
+Used only by :mod:`drivefuzz.sim.execute`, which passes in the simulation module
 (libsumo, or traci for ``--gui``); nothing here imports either.
 """
 
@@ -15,7 +15,7 @@ import numpy as np
 from drivefuzz.ads import OBSERVATION_RADIUS, ObjectState
 from drivefuzz.oracle import Obstacle
 from drivefuzz.scenario import ActorKind, ManeuverAction, NavType, Scenario
-from drivefuzz.trace import Recorder
+from drivefuzz.sim.trace import Recorder
 
 #: POI/polygon types the collision oracle treats as solid (a user's polygon file may use them).
 OBSTACLE_TYPES = ("building", "obstacle", "barrier", "pole", "fence", "wall", "drivefuzz.obstacle")
