@@ -23,6 +23,12 @@ class ImmobilityOracle(Oracle):
     ego that never goes on green is caught even though each red phase
     excuses it again.
 
+    Frames in which the ADS has declared its mission done (``frame.ads_done``)
+    do not count either: that stop is the mission oracle's ``stopped_short``,
+    recorded the moment it is declared, and one standstill is one finding. In
+    turn the mission oracle leaves a time-out that ends in a standstill of
+    this oracle's threshold to this oracle (see :class:`oracles.mission.MissionOracle`).
+
     A stop is legitimate in a frame when one of these holds (checked in order):
 
     1. **Goal**: the ego is within ``goal_distance`` of the goal point.
@@ -94,7 +100,7 @@ class ImmobilityOracle(Oracle):
             return ()
         if self._since is None:  # a new standstill
             self._since, self._illegit, self._last_t = t, 0.0, t
-            self._legit = self.legitimate(frame) is not None
+            self._legit = frame.ads_done or self.legitimate(frame) is not None
             return ()
         dt = t - self._last_t
         self._last_t = t
@@ -104,7 +110,7 @@ class ImmobilityOracle(Oracle):
         # every frame: the reasons change at a light's switch or when a pedestrian walks off)
         if not self._legit:
             self._illegit += dt
-        self._legit = self.legitimate(frame) is not None
+        self._legit = frame.ads_done or self.legitimate(frame) is not None
         if self._illegit <= self._threshold:
             return ()
         self._fired = True

@@ -19,6 +19,8 @@ _CELL = 8.0
 _REACH = 1.5
 #: Heading difference above which a lane runs against the ego.
 _OPPOSITE = math.radians(135.0)
+#: Heading change at one vertex of a lane's shape from which the vertex counts as a street corner.
+_BEND = math.radians(30.0)
 #: Severity order when corners disagree.
 _SEVERITY = {"opposite_lane": 4, "sidewalk": 3, "solid_line": 2, "off_road": 1}
 
@@ -39,6 +41,12 @@ class _Lane:
     total: float = 0.0
     change_left: bool = True  # passenger cars may change to the lane on the left
     change_right: bool = True
+    bends: list[float] = field(default_factory=list)  # [m] along the lane: vertices that turn by >= _BEND
+
+    def near_bend(self, s0: float, s1: float) -> bool:
+        """Whether a sharp bend lies between ``s0`` and ``s1`` [m along the lane]."""
+        k = bisect.bisect_left(self.bends, s0)
+        return k < len(self.bends) and self.bends[k] <= s1
 
     def seg_at(self, s: float) -> int:
         return min(max(bisect.bisect_right(self.starts, s) - 1, 0), len(self.segs) - 1)
@@ -91,6 +99,8 @@ class _NetIndex:
                 lane.total = cum
                 if not lane.segs:
                     continue
+                lane.bends = [b[5] for a, b in zip(lane.segs[:-1], lane.segs[1:])
+                              if abs(wrap_angle(b[6] - a[6])) >= _BEND]
                 lane.change_left = rmap.may_change(lane.id, left=True)
                 lane.change_right = rmap.may_change(lane.id, left=False)
                 self.lanes[lane.id] = lane
@@ -132,6 +142,7 @@ class _NetIndex:
             return poly if poly.area > 0 else None
 
         junctions.extend(filter(None, (area(node.getShape()) for node in net.getNodes())))
+        car_lanes = []
         for e in net.getEdges(withInternal=True):
             func = e.getFunction()
             if func == "walkingarea":
@@ -143,14 +154,32 @@ class _NetIndex:
                     if ln.allows(PASSENGER) and len(shape) >= 2:
                         line = LineString([(p[0], p[1]) for p in shape])
                         if line.length > 1e-6:
-                            junctions.append(line.buffer(0.5 * ln.getWidth(), cap_style="flat"))
+                            car_lanes.append(line.buffer(0.5 * ln.getWidth(), cap_style="flat"))
         self.walk = unary_union(walks) if walks else None
         self.drivable = None
-        if junctions:
-            self.drivable = unary_union(junctions)
-            if self.walk is not None:
-                self.drivable = self.drivable.difference(self.walk)
+        if junctions and self.walk is not None:
+            # the junction shape minus its walking areas, but every junction lane for cars whole: on
+            # OSM imports a walking area often covers the whole junction of a road that pedestrians
+            # share (a footpath meeting a street), and the cars' own lane through it stays drivable
+            junctions = [unary_union(junctions).difference(self.walk)]
+        self._parts = None  # the drivable area's polygons in an STRtree, for depths (built when first asked)
+        if junctions or car_lanes:
+            self.drivable = unary_union(junctions + car_lanes)
         self._drivable_tol: dict[float, object] = {}
+
+    def junction_distance(self, x: float, y: float) -> float:
+        """Distance [m] from (x, y) to the drivable junction area (inf beyond ``_REACH`` + 1 m, or none)."""
+        if self.drivable is None:
+            return math.inf
+        import shapely
+
+        if self._parts is None:
+            parts = list(getattr(self.drivable, "geoms", [self.drivable]))
+            self._parts = (parts, shapely.STRtree(parts))
+        parts, tree = self._parts
+        p = shapely.Point(x, y)
+        near = tree.query(p.buffer(_REACH + 1.0))
+        return min((parts[k].distance(p) for k in near.tolist()), default=math.inf)
 
     def drivable_within(self, tol: float):
         """The drivable junction area grown by ``tol`` (prepared), or None."""
@@ -219,15 +248,21 @@ class LaneInvasionOracle(Oracle):
     and ``ctx.ego_length/width``) are tested against the road map:
 
     - A corner is **fine** when it lies in a junction's drivable area (the
-      junction shape and the junction lanes for cars, minus walking areas,
-      grown by ``tolerance``), or within ``tolerance`` of the lateral bounds of
+      junction shapes minus walking areas, plus the whole of every junction
+      lane for cars, grown by ``tolerance``: OSM imports lay walking areas
+      over the whole junction where a footpath meets a street that pedestrians
+      share, and the cars' lanes through it stay drivable), or within ``tolerance`` of the lateral bounds of
       an *allowed* lane: a lane of a normal edge that allows passenger cars,
       does not run against the ego, and is not across a forbidden lane
       boundary from the ego's own lane. While any corner is on a junction
-      (entering or leaving it) ``junction_tolerance`` replaces ``tolerance``
-      for the lanes: a turning body sweeps across the lines that start at the
+      (entering or leaving it), or the body is within reach of a street
+      corner inside its lane's shape (a vertex that turns by 30 degrees or
+      more: OSM edges bend round corners without a junction),
+      ``junction_tolerance`` replaces ``tolerance`` for the lanes and the
+      junction area: a turning body sweeps across the lines that start at the
       junction (the reference ADS's front corner reaches 0.3 m over the centre
-      line leaving the tight corner junctions of the town grid).
+      line leaving the tight corner junctions of the town grid, and 0.3 m over
+      the inner kerb of the tight junctions and lane bends of OSM imports).
     - A lane **runs against the ego** when its edge is the reverse (same nodes,
       swapped) of the edge the ego drives along (the last edge it was on in its
       own direction and, when that edge is on the route, the next route edge),
@@ -254,12 +289,25 @@ class LaneInvasionOracle(Oracle):
     shapely is asked about the junction area only when a corner lies in a grid
     cell that touches it.
 
-    One record per episode: after a record the oracle is silent until all
-    corners were fine again. Kinds ``"opposite_lane"``, ``"sidewalk"``,
+    An **episode** is an unbroken run of frames with a violation. It is
+    recorded once its deepest corner is at least ``min_depth`` beyond the
+    tolerance band, or once it has lasted ``min_duration`` (each violating
+    frame counts one step), whichever comes first; shallower and shorter
+    grazes are not recorded. Defaults: 0.1 m (a body 0.3 m over a lane line,
+    0.6 m over a line at a junction) and 0.3 s (6 steps at 20 Hz): a corner
+    that sweeps a few centimetres past the band for a frame or two, where a
+    turn leaves a tight junction, is the path tracker rounding a polyline
+    corner, not a lane departure, while a drifting car (``steer_left``) goes
+    deeper within a few steps. A corner in a forbidden area with no allowed
+    lane or junction within reach counts as infinitely deep. One record per
+    episode: after a record the oracle is silent until all corners were
+    fine again. Kinds ``"opposite_lane"``, ``"sidewalk"``,
     ``"off_road"``, ``"solid_line"``; details: ``lane`` (the lane the worst corner
     lies in, ``""`` if none), ``corner`` (0 front-right, 1 front-left, 2 rear-left,
-    3 rear-right), ``corner_xy``, ``depth`` [m] (how far the corner is beyond the
-    tolerance band of the nearest allowed lane, when known), ``ego_lane``.
+    3 rear-right), ``corner_xy``, ``depth`` [m] (the deepest corner of the episode so
+    far: how far beyond the tolerance band of the nearest allowed lane or
+    junction area; ``None`` when none is within reach), ``duration`` [s] (of the
+    episode so far), ``since`` [s] (simulation time it began), ``ego_lane``.
     """
 
     name = "lane_invasion"
@@ -269,6 +317,8 @@ class LaneInvasionOracle(Oracle):
         tolerance: float = Field(0.2, ge=0.0, le=1.0, description="[m] a corner may stick out of its lane or junction")
         junction_tolerance: float = Field(0.5, ge=0.0, le=_REACH,
                                           description="[m] the same while part of the body is on a junction")
+        min_depth: float = Field(0.1, ge=0.0, description="[m] beyond the tolerance that fires at once")
+        min_duration: float = Field(0.3, ge=0.0, description="[s] a shallower violation must last to fire")
 
     def reset(self, ctx: RunContext) -> None:
         super().reset(ctx)
@@ -277,6 +327,8 @@ class LaneInvasionOracle(Oracle):
         self._jtol = float(self.config.junction_tolerance)
         self._drivable = self._idx.drivable_within(self._tol)
         self._drivable_cells = self._idx.drivable_cells(self._tol)
+        self._drivable_j = self._idx.drivable_within(self._jtol)
+        self._drivable_cells_j = self._idx.drivable_cells(self._jtol)
         import shapely
 
         self._contains_xy = shapely.contains_xy
@@ -289,7 +341,15 @@ class LaneInvasionOracle(Oracle):
         self._ref: frozenset[str] = frozenset()  # edges the ego drives along now
         self._against: frozenset[str] = frozenset()  # their reverse edges
         self._ref_edge = ""
-        self._episode = False
+        self._min_depth = float(self.config.min_depth)
+        self._min_duration = float(self.config.min_duration) - 1e-9
+        self._dt = float(ctx.step_length)
+        self._clear()
+
+    def _clear(self) -> None:
+        """All corners are fine: the next violation starts a new episode."""
+        self._episode = False  # this episode was recorded
+        self._pending: list | None = None  # [start t, worst violation, deepest depth] while not yet recorded
 
     # ------------------------------------------------------------------ frame
     def on_frame(self, frame: Frame) -> Sequence[Misbehavior]:
@@ -327,7 +387,8 @@ class LaneInvasionOracle(Oracle):
                     if ok:
                         if self._home_lane is not lane:
                             self._home_lane = lane
-                        self._episode = False
+                        if self._pending is not None or self._episode:
+                            self._clear()
                         return ()
         return self._slow(frame, self._corners(x, y, c, s), lane if aligned else None)
 
@@ -370,15 +431,27 @@ class LaneInvasionOracle(Oracle):
         home = self._home_lane
         if home is not None and lane is not None and lane.edge != home.edge:
             home = None
+        # a street corner inside a lane's shape (OSM edges turn corners without a junction) is driven
+        # like a junction: the body cannot follow a polyline's vertex
+        s0 = frame.lane_pos - self._hl if frame.lane_pos == frame.lane_pos else math.nan
+        on = self._idx.lanes.get(frame.lane) if frame.lane else None  # aligned or not: it may bend round
+        turning = any_junction or (on is not None and bool(on.bends) and s0 == s0
+                                   and on.near_bend(s0 - self._reach - 1.0, s0 + self._reach + 1.0))
         if home is None and lane is not None and lane.passenger and not any_junction:
             # no lane of this edge has held the whole body yet: once the body has left the
             # junction, the lane SUMO puts the ego on is its own (a turn may end straddling)
             home = lane
         # entering or leaving a junction, a turning body sweeps across the lines that start there
-        tol_lane = max(tol, self._jtol) if any_junction else tol
-        worst = None  # (severity, kind, corner, lane id, depth)
+        tol_lane = max(tol, self._jtol) if turning else tol
+        wide = self._jtol > tol and turning  # the junction area, too, gets the junction tolerance
+        worst = None  # (severity, kind, corner, lane id)
+        depth = -math.inf  # the deepest violating corner [m beyond the tolerance band]
+        deep = not self._episode  # depths are needed until the episode is recorded
         for i, (px, py) in enumerate(pts):
             if in_junction[i]:
+                continue
+            if wide and (math.floor(px / _CELL), math.floor(py / _CELL)) in self._drivable_cells_j \
+                    and self._contains_xy(self._drivable_j, px, py):
                 continue
             if home is not None and home.edge not in self._against:
                 d, lh = home.distance(px, py)
@@ -421,19 +494,36 @@ class LaneInvasionOracle(Oracle):
                 if best_sev == 0:
                     best_sev = _SEVERITY["off_road"]
             if worst is None or best_sev > worst[0]:
-                worst = (best_sev, best_kind, i, best_lane, nearest_ok)
+                worst = (best_sev, best_kind, i, best_lane, (round(px, 3), round(py, 3)))
+            if deep:
+                jtol = tol_lane if wide else tol
+                depth = max(depth, min(nearest_ok, self._idx.junction_distance(px, py) - jtol))
         if worst is None:
             if home is not None and home is not self._home_lane:
                 self._home_lane = home
-            self._episode = False
+            self._clear()
             return ()
         if self._episode:
             return ()
-        self._episode = True
-        _sev, kind, i, lane_id, depth = worst
-        return (self.report(frame, kind, (), lane=lane_id, corner=i,
-                            corner_xy=[round(pts[i][0], 3), round(pts[i][1], 3)],
-                            depth=None if depth == math.inf else round(depth, 3), ego_lane=frame.lane),)
+        return self._episode_step(frame, worst, depth)
+
+    def _episode_step(self, frame: Frame, worst: tuple, depth: float) -> Sequence[Misbehavior]:
+        """One more violating frame of an episode not yet recorded: record it once it is deep or long enough."""
+        pend = self._pending
+        if pend is None:
+            pend = self._pending = [frame.t, worst, depth]
+        else:
+            if worst[0] > pend[1][0]:
+                pend[1] = worst
+            pend[2] = max(pend[2], depth)
+        duration = frame.t - pend[0] + self._dt  # each violating frame stands for one step
+        if pend[2] < self._min_depth and duration < self._min_duration:
+            return ()
+        self._episode, self._pending = True, None
+        _sev, kind, i, lane_id, xy = pend[1]
+        return (self.report(frame, kind, (), lane=lane_id, corner=i, corner_xy=list(xy),
+                            depth=None if pend[2] == math.inf else round(pend[2], 3),
+                            duration=round(duration, 3), since=round(pend[0], 3), ego_lane=frame.lane),)
 
     def _may_change(self, target: _Lane, home_index: int) -> bool:
         """Passenger cars may change from lane ``home_index`` of ``target``'s edge to ``target``."""

@@ -8,7 +8,6 @@ from typing import Sequence
 from pydantic import Field
 
 from drivefuzz.oracle import Frame, Misbehavior, Oracle, RunContext, Termination
-from oracles import STOP_STATES
 
 
 class MissionOracle(Oracle):
@@ -26,13 +25,21 @@ class MissionOracle(Oracle):
       length) after it was on the goal edge at or before that point; or, after
       its centre was on the goal edge beyond ``goal_pos``, it is on any other
       edge (a junction, the next road) or off the road.
-    - At the end of a run that ended by the time limit (``Termination.TIME_LIMIT``;
-      never when an oracle's misbehaviour ended the run, the ego was lost, or
-      the goal was reached) with the ego not at the goal:
-      ``"stopped_short"`` if it has been stopped for at least ``stop_time``
-      seconds at the end and is not waiting at a red light (the next light on
-      its route shows a stop state within ``red_light_distance``); otherwise
-      ``"timeout"``.
+    - ``"timeout"``: at the end of a run that ended by the time limit
+      (``Termination.TIME_LIMIT``; never when an oracle's misbehaviour ended
+      the run, the ego was lost, or the goal was reached) with the ego not at
+      the goal, unless the ego ends the run in a standstill of at least
+      ``stop_time`` seconds.
+
+    **One standstill, one finding.** A standstill away from the goal belongs
+    to the immobility oracle, which fires once its illegitimate part exceeds
+    its threshold (60 s) and judges whether a red light, a pedestrian or a
+    queue excuses it. So a timed-out run that ends in a standstill as long as
+    that threshold (``stop_time``, 60 s: keep the two equal) is left to it:
+    immobility has fired on it, or the stop was legitimate (a blocked road is
+    not the ADS's failure). The one standstill the mission owns is the one
+    the ADS declares final (``"stopped_short"``, recorded the moment it is
+    declared); immobility does not count the frames after that declaration.
 
     Each kind is recorded at most once per run, and no ``"timeout"`` follows a
     ``"stopped_short"`` or ``"overshoot"`` already recorded (possible only when
@@ -40,7 +47,8 @@ class MissionOracle(Oracle):
 
     Details: ``goal_dist`` [m]; ``"overshoot"``: ``beyond`` [m past the goal
     along the edge, when on it], ``edge``; ``"stopped_short"``: ``stopped_for``
-    [s], ``ads_done``; ``"timeout"``: ``time_limit`` [s], ``speed`` [m/s].
+    [s], ``ads_done``; ``"timeout"``: ``time_limit`` [s], ``speed`` [m/s], ``stopped_for`` [s]
+    (the standstill it ended in, 0 if moving).
     """
 
     name = "mission"
@@ -48,10 +56,10 @@ class MissionOracle(Oracle):
 
     class Config(Oracle.Config):
         distance: float = Field(5.0, ge=0.0, description="[m] from the goal point that counts as at the goal")
-        stop_time: float = Field(20.0, ge=0.0, description="[s] stopped at the end of a timed-out run: stopped short")
+        stop_time: float = Field(60.0, ge=0.0, description="[s] a timed-out run ending in a standstill this long "
+                                 "is left to immobility (keep equal to immobility.threshold)")
         stop_speed: float = Field(0.1, gt=0.0, description="[m/s] below which the ego counts as stopped")
         overshoot: float = Field(5.0, ge=0.0, description="[m] past the goal along the goal edge")
-        red_light_distance: float = Field(30.0, ge=0.0, description="[m] a red light this close excuses a stop")
 
     def reset(self, ctx: RunContext) -> None:
         super().reset(ctx)
@@ -114,11 +122,9 @@ class MissionOracle(Oracle):
             return ()
         snap = SimpleNamespace(index=index, t=t, x=x, y=y)
         stopped = self._stopped_for(t)
-        at_red = nt is not None and nt[3] in STOP_STATES and nt[2] <= c.red_light_distance
-        if self._stopped_since is not None and stopped >= c.stop_time and not at_red:
-            self._reported.add("stopped_short")
-            return (self.report(snap, "stopped_short", (), goal_dist=round(goal_dist, 3), ads_done=bool(ads_done),
-                                stopped_for=round(stopped, 3)),)
+        if self._stopped_since is not None and stopped >= c.stop_time:
+            return ()  # the immobility oracle's standstill
         self._reported.add("timeout")
         return (self.report(snap, "timeout", (), goal_dist=round(goal_dist, 3),
-                            time_limit=float(self.ctx.scenario.sim.time_limit), speed=round(speed, 3)),)
+                            time_limit=float(self.ctx.scenario.sim.time_limit), speed=round(speed, 3),
+                            stopped_for=round(stopped, 3)),)

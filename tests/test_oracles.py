@@ -437,6 +437,49 @@ def test_lane_invasion_off_road_and_tolerance():
     assert [m.kind for m in o.on_frame(f)] == ["opposite_lane"]
 
 
+def _hold(o, f, y: float, frames: int, t0: float) -> list[str]:
+    """Feed ``frames`` frames at 20 Hz with the ego's centre at ``y``; the kinds recorded."""
+    out = []
+    for k in range(frames):
+        f.t, f.index, f.y = t0 + 0.05 * k, int(t0 / 0.05) + k, y
+        out.extend(m.kind for m in o.on_frame(f))
+    return out
+
+
+def test_lane_invasion_shallow_graze_needs_min_duration():
+    rmap = load_roadmap(NET)
+    ctx = RunContext(None, rmap, ("A0B0", "B0C0"), (0.0, 0.0), EGO_L, EGO_W, 0.05)
+    o = LaneInvasionOracle()
+    assert (o.config.min_depth, o.config.min_duration) == (0.1, 0.3)
+    o.reset(ctx)
+    f = Frame(x=50.0, y=-4.8, heading=0.0, lane="A0B0_1", edge="A0B0", lane_pos=52.3)
+    # 0.25 m onto the sidewalk: 0.05 m beyond the tolerance, shallower than min_depth
+    assert _hold(o, f, -5.7, 5, 0.0) == []  # 0.25 s, then back in the lane: a graze, silent
+    assert _hold(o, f, -4.8, 2, 0.25) == []
+    got = _hold(o, f, -5.7, 6, 0.35)  # the same depth held for 0.3 s: recorded on the 6th frame
+    assert got == ["sidewalk"]
+    assert _hold(o, f, -5.7, 20, 0.65) == []  # one record per episode
+    # the old behaviour, as settings: every touch beyond the tolerance fires at once
+    o = LaneInvasionOracle({"min_depth": 0.0, "min_duration": 0.0})
+    o.reset(ctx)
+    assert _hold(o, f, -5.7, 1, 0.0) == ["sidewalk"]
+
+
+def test_lane_invasion_record_says_how_deep_and_how_long():
+    rmap = load_roadmap(NET)
+    o = LaneInvasionOracle()
+    o.reset(RunContext(None, rmap, ("A0B0", "B0C0"), (0.0, 0.0), EGO_L, EGO_W, 0.05))
+    f = Frame(x=50.0, y=-4.8, heading=0.0, lane="A0B0_1", edge="A0B0", lane_pos=52.3)
+    out = []
+    for k, y in enumerate((-5.7, -5.72, -5.85)):  # 0.05, 0.07, then 0.2 m beyond the tolerance
+        f.t, f.index, f.y = 1.0 + 0.05 * k, 20 + k, y
+        out.extend(o.on_frame(f))
+    (m,) = out
+    assert m.frame == 22 and m.kind == "sidewalk"
+    assert m.details["depth"] == pytest.approx(0.2, abs=1e-6)
+    assert m.details["duration"] == pytest.approx(0.15) and m.details["since"] == pytest.approx(1.0)
+
+
 # ------------------------------------------------------------------- mission
 def test_mission_timeout():
     ex = run(scenario(**NORMAL, time_limit=15.0), MissionOracle())
@@ -460,10 +503,16 @@ def test_mission_stopped_short():
     assert m.details["ads_done"] is True and m.details["goal_dist"] == pytest.approx(30.0, abs=2.0)
 
 
-def test_mission_stopped_for_good_at_time_limit():
+def test_mission_standstill_shorter_than_immobility_threshold_is_a_timeout():
+    # never moves, 30 s limit: the standstill is shorter than immobility's 60 s, so the mission
+    # reports the time-out (with how long the ego had stood)
     ex = run(scenario("A0B0_1", 10.0, "B0C0", 60.0, time_limit=30.0, fault="no_control"), MissionOracle())
     (m,) = ex.misbehaviors
-    assert m.kind == "stopped_short" and m.details["stopped_for"] >= 20.0
+    assert m.kind == "timeout" and m.details["stopped_for"] >= 29.0
+    # the same run with stop_time below the standstill: left to immobility, the mission is silent
+    ex = run(scenario("A0B0_1", 10.0, "B0C0", 60.0, time_limit=30.0, fault="no_control"),
+             MissionOracle({"stop_time": 20.0}))
+    assert ex.misbehaviors == ()
 
 
 def test_mission_completed_is_silent():
