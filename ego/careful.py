@@ -12,8 +12,8 @@ the tracks its perception keeps), so it follows the reference as that changes:
   hazard being a tracked body in its path corridor now or, for pedestrians and moving vehicles,
   predicted there within :data:`HORIZON` s by the time the car would get there;
 - it keeps a larger headway (:attr:`Options.headway`, default 2 s) to vehicles in its path;
-- it drives no faster than it can stop within 80 % of what its sensors see (fog, rain), and aims
-  at a lower fraction of the speed limit.
+- where fog or rain shorten its sensor range, it drives no faster than it can stop from comfortably
+  within 60 % of what it sees; it aims at a lower fraction of the speed limit.
 
 Units: SI, radians ENU.
 """
@@ -36,8 +36,10 @@ STEPS = (0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0)
 REACTION = 0.2
 #: [m/s^2] the deceleration it counts on for its stopping distance (below full braking: wet roads).
 PLANNING_DECEL = 6.0
-#: [m/s^2] the sensing-limited speed is the one it can stop from at this deceleration.
-VISIBILITY_DECEL = 4.0
+#: [m/s^2] in fog or rain it drives no faster than it can stop from at this deceleration ...
+VISIBILITY_DECEL = 3.0
+#: ... within this share of its (shortened) sensor range.
+SIGHT_SHARE = 0.6
 
 
 class CarefulADS(ReferenceADS):
@@ -72,13 +74,14 @@ class CarefulADS(ReferenceADS):
         return Control(control.steer, throttle, brake)
 
     def _visibility_cap(self, obs: Observation) -> float:
-        """[m/s] the speed it can stop from within 80 % of its sensor range (0: no cap beyond the option)."""
-        rng = 0.8 * self.sensors.effective_range(obs.weather)
-        a = VISIBILITY_DECEL
-        cap = a * (-REACTION + math.sqrt(REACTION * REACTION + 2.0 * rng / a))
-        if self._cruise > 0:
-            cap = min(cap, self._cruise)
-        return max(cap, 2.0)
+        """[m/s] when weather shortens its sensor range, the speed it can stop from comfortably within
+        :data:`SIGHT_SHARE` of what it sees (0: no cap beyond the option)."""
+        rng = self.sensors.effective_range(obs.weather)
+        if rng >= self.sensors.spec.range_m - 1e-6:
+            return self._cruise
+        a, d = VISIBILITY_DECEL, SIGHT_SHARE * rng
+        cap = max(a * (-REACTION + math.sqrt(REACTION * REACTION + 2.0 * d / a)), 2.0)
+        return min(cap, self._cruise) if self._cruise > 0 else cap
 
     def _hazard_accel(self, obs: Observation) -> float | None:
         """The acceleration [m/s^2] its hazards allow (None: no constraint); ``-max_brake`` = brake fully."""
@@ -116,7 +119,7 @@ class CarefulADS(ReferenceADS):
                     return -self.params.max_brake_decel
                 if not ped and h == 0.0:
                     dv = v - max(along, 0.0)
-                    a = idm_accel(v, max(v, 1.0), gap, dv, s0=self.options.min_gap, T=self.options.headway)
+                    a = idm_accel(v, 100.0, gap, dv, s0=self.options.min_gap, T=self.options.headway)  # the gap term only
                     best = a if best is None else min(best, a)
                 break
         return best

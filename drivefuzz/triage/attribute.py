@@ -27,7 +27,9 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
 - **Avoidability by counterfactual replay**: when no rule excuses the ego and the caller gives
   ``replay``, the same scenario is driven by the careful reference driver (ADS ``careful``,
   :mod:`ego.careful`). If it fails the same way (same oracle, same other party), the situation
-  was unavoidable: ``other``.
+  was unavoidable: ``other``. Not after a rule that found the ego's own fault (it entered on red;
+  it stayed behind a stationary body with a lane free): the careful driver would share the one
+  (it does not overtake either) and never meet the other.
 
 Otherwise the verdict is ``ego`` with what the ego did; ``unclear`` when the trace lacks the
 evidence (the other party is not in it, the frame is outside it).
@@ -170,6 +172,28 @@ def contact_side(point: tuple[float, float] | None) -> str:
     return "left" if v > 0 else "right"
 
 
+def approach(trace, f: int, other: Track, before: float = 2.0) -> str:
+    """Where ``other`` came from relative to the ego, ``before`` seconds ahead of frame ``f`` (or when it
+    first appeared): behind/ahead (travelling the ego's way, or standing), oncoming, left/right
+    (crossing; the side it was on). "none" without the other."""
+    k = max(f - int(round(before / trace.step_length)), 0)
+    present = [j for j in range(k, f + 1) if other.present(j)]
+    if not present:
+        return "none"
+    k = present[0]
+    lx, ly = to_local(trace, k, float(other.x[k]), float(other.y[k]))
+    if float(other.speed[k]) > 0.5:
+        dh = abs(_angle(float(other.heading[k]) - float(trace["heading"][k])))
+        if dh >= 3 * math.pi / 4:
+            return "oncoming"
+        if dh > math.pi / 4:
+            return "left" if ly > 0 else "right"
+        return "ahead" if lx > 0 else "behind"
+    if abs(lx) >= abs(ly):
+        return "ahead" if lx > 0 else "behind"
+    return "left" if ly > 0 else "right"
+
+
 def _window(trace, f: int, seconds: float) -> slice:
     return slice(max(f - int(round(seconds / trace.step_length)), 0), f + 1)
 
@@ -216,7 +240,7 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
     f = min(max(int(misbehavior.frame), 0), n - 1)
     ev = _Event(scenario, trace, misbehavior, rmap, f)
     verdict = ev.judge()
-    if verdict.fault is Fault.EGO and replay is not None:
+    if verdict.fault is Fault.EGO and not ev.decided and replay is not None:
         return counterfactual(scenario, misbehavior, replay, verdict)
     return verdict
 
@@ -241,6 +265,9 @@ class _Event:
 
     def __init__(self, scenario, trace, mb, rmap, f: int):
         self.scenario, self.trace, self.mb, self.rmap, self.f = scenario, trace, mb, rmap, f
+        #: an ``ego`` verdict from a rule that saw the ego's own fault (the careful driver would
+        #: share it or never meet it): no counterfactual
+        self.decided = False
         self.v = float(trace["speed"][f])
         self.base = {"frame": f, "time": round(float(trace["t"][f]), 3), "ego_speed": self.v,
                      "ego_lane": str(trace["lane"][f])}
@@ -248,7 +275,8 @@ class _Event:
     def other(self, reason: str, **evidence) -> Attribution:
         return Attribution(Fault.OTHER, reason, {**self.base, **evidence})
 
-    def ego(self, reason: str, **evidence) -> Attribution:
+    def ego(self, reason: str, decided: bool = False, **evidence) -> Attribution:
+        self.decided = decided
         return Attribution(Fault.EGO, reason, {**self.base, **evidence})
 
     def judge(self) -> Attribution:
@@ -281,7 +309,13 @@ class _Event:
             if verdict is not None:
                 return verdict
         if red is not None:
-            return self.ego(f"the ego entered the junction on red (frame {red}) and hit {oth.id}", red_frame=red)
+            return self.ego(f"the ego entered the junction on red (frame {red}) and hit {oth.id}", decided=True,
+                            red_frame=red)
+        if oth.kind == "vehicle" and self._ego_must_yield_to(oth):
+            mine = ego_link(trace, self.rmap, f)
+            return self.ego(f"the ego did not yield to the vehicle {oth.id} at {mine.getJunction().getID()}: its link "
+                            f"from {mine.getFromLane().getID()} must yield", decided=True,
+                            ego_from=mine.getFromLane().getID())
         still = float(np.nanmax(oth.speed[_window(trace, f, 2.0)])) <= STATIONARY_SPEED
         what = f"stationary {oth.kind}" if still else oth.kind
         return self.ego(f"the ego struck the {what} {oth.id} with its {side} at {self.v:.1f} m/s")
@@ -298,6 +332,12 @@ class _Event:
             return None
         if red is not None or not trace["lane"][f] or lane_changed(trace, f):
             return None
+        # from behind: travelling the ego's way (a crossing or oncoming car that clips the rear
+        # half is a right-of-way question, not a rear-end)
+        if abs(_angle(float(oth.heading[f]) - float(trace["heading"][f]))) > math.pi / 4:
+            return None
+        if str(trace["lane"][f]).startswith(":") and self._ego_must_yield_to(oth):
+            return None
         w = _window(trace, f, 3.0)
         decel = -trace["ax"][w]
         peak = float(np.nanmax(decel)) if len(decel) else 0.0
@@ -313,6 +353,16 @@ class _Event:
         return self.other(f"the vehicle {oth.id} struck the ego's rear half at {dv:.1f} m/s faster while the ego "
                           f"drove lawfully in its lane, braking at most {max(peak, 0.0):.1f} m/s^2{why}",
                           peak_decel=peak, hazard=hazard)
+
+    def _ego_must_yield_to(self, oth: Track) -> bool:
+        mine = ego_link(self.trace, self.rmap, self.f)
+        link = other_link(self.trace, self.rmap, oth, self.f)
+        if mine is None or link is None or mine.getJunction().getID() != link[0].getJunction().getID():
+            return False
+        try:
+            return bool(mine.getJunction().forbids(link[0], mine))
+        except (IndexError, KeyError, AttributeError):
+            return False
 
     def _hazard_ahead(self, k: int, exclude: str) -> str | None:
         """What justified hard braking at frame ``k``: a body in the path ahead, or a stop light."""
@@ -410,8 +460,9 @@ class _Event:
             return self.other(f"the queue ahead is itself blocked: {queue}", queue=queue, **ev)
         own = lanes.get(str(trace["lane"][f]))
         if own is not None:
-            return self.ego(f"the ego stayed behind the stationary {own} although {', '.join(free)} was free", **ev)
-        return self.ego(f"the ego stood still although {', '.join(free)} was free", **ev)
+            return self.ego(f"the ego stayed behind the stationary {own} although {', '.join(free)} was free",
+                            decided=True, **ev)
+        return self.ego(f"the ego stood still although {', '.join(free)} was free", decided=True, **ev)
 
 
 # ---------------------------------------------------------------------- junction links

@@ -1,0 +1,292 @@
+"""Attribution on real SUMO runs: each situation is built by hand on the town grid and its verdict
+asserted, with twins that differ in who is at fault (so that every rule can fail).
+
+Town facts used (see tests/test_oracles.py): streets 30 km/h, avenues 50 km/h, driving lanes
+``_1`` (right) and ``_2`` (left), sidewalk ``_0``. B1 is signalised (from the south, B0B1, red
+for 0-45 s; from the west, A1B1, green for 0-35 s). B0 is a priority junction: the east-west
+street is the major road; turning left from A0B0 into B0B1, or from B1B0 into B0C0, must yield.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import pytest
+
+from drivefuzz.oracle import Misbehavior
+from drivefuzz.scenario import Actor, AdsSpec, Maneuver, Mission, Scenario, SimOptions
+from drivefuzz.scenario.roadmap import load_roadmap
+from drivefuzz.sim.execute import execute
+from drivefuzz.triage.attribute import Attribution, Fault, attribute, counterfactual, signal_state
+from ego.ads import ReferenceADS
+from oracles.collision import CollisionOracle
+from oracles.immobility import ImmobilityOracle
+
+NET = str(Path(__file__).resolve().parent.parent / "networks" / "town.net.xml")
+
+
+class BlindADS(ReferenceADS):
+    """The reference ADS that sees no other road user (it drives into whatever is in its lane)."""
+
+    def step(self, obs):
+        return super().step(dataclasses.replace(obs, objects=()))
+
+
+def scenario(start_lane, start_pos, goal_edge, goal_pos, *actors, time_limit=40.0, fault="none") -> Scenario:
+    return Scenario(network=NET, mission=Mission(start_lane=start_lane, start_pos=start_pos, goal_edge=goal_edge,
+                                                 goal_pos=goal_pos),
+                    sim=SimOptions(time_limit=time_limit), ads=AdsSpec(name="ego", options={"fault": fault}),
+                    actors=tuple(actors))
+
+
+def oracles():
+    return [CollisionOracle(), ImmobilityOracle({"threshold": 10.0})]
+
+
+def replay(sc: Scenario):
+    ex = execute(sc, oracles=oracles())
+    return ex.misbehaviors, ex.trace
+
+
+def judge(sc: Scenario, ads=None, with_replay=False):
+    ex = execute(sc, ads=ads, oracles=oracles())
+    assert ex.misbehaviors, "the situation must produce a misbehaviour"
+    m = ex.misbehaviors[0]
+    verdict = attribute(sc, ex.trace, m, load_roadmap(NET), replay=replay if with_replay else None)
+    assert verdict.reason and "\n" not in verdict.reason
+    assert json.loads(json.dumps(verdict.as_dict())) == verdict.as_dict()  # JSON-safe
+    return m, verdict
+
+
+def rammer(start_pos=5.0):
+    return Actor(id="v2", kind="vehicle", nav="linear", start_lane="A0B0_1", start_pos=start_pos, speed=8.0,
+                 dest_edge="B0C0")
+
+
+# ------------------------------------------------------------------ rear-ended while stopped
+def test_rear_ended_while_stopped_is_other():
+    sc = scenario("A0B0_1", 40.0, "B0C0", 40.0, rammer(), time_limit=20.0, fault="no_control")
+    m, v = judge(sc)
+    assert (m.oracle, m.actors) == ("collision", ("v2",))
+    assert v.fault is Fault.OTHER
+    assert "stationary" in v.reason
+    assert v.evidence["contact_side"] == "rear" and v.evidence["ego_speed"] < 0.1
+
+
+def test_rear_ended_while_driving_lawfully_is_other():
+    # the ego drives off normally; a linear car at 12 m/s (above the street's limit) runs into it
+    sc = scenario("A0B0_1", 30.0, "B0C0", 40.0,
+                  Actor(id="v2", kind="vehicle", nav="linear", start_lane="A0B0_1", start_pos=5.0, speed=12.0,
+                        dest_edge="B0C0"), time_limit=20.0)
+    m, v = judge(sc)
+    assert m.oracle == "collision" and v.fault is Fault.OTHER
+    assert "rear half" in v.reason and v.evidence["ego_speed"] > 0.5
+    assert v.evidence["peak_decel"] <= 3.5
+
+
+# ------------------------------------------------------------------ junctions
+def test_red_light_runner_is_other():
+    # the ego crosses B1 eastbound on green; a linear car from the south runs its red
+    runner = Actor(id="v2", kind="vehicle", nav="linear", start_lane="B0B1_1", start_pos=27.0, speed=10.0, depart=3.0,
+                   dest_edge="B1B2")
+    m, v = judge(scenario("A1B1_1", 40.0, "B1C1", 40.0, runner, time_limit=30.0))
+    assert m.actors == ("v2",)
+    assert v.fault is Fault.OTHER and "on red" in v.reason
+    assert v.evidence["other_signal"] == "r" and v.evidence["other_from"] == "B0B1_1"
+
+
+def test_ego_running_red_into_crossing_traffic_is_ego():
+    # the twin: the ego (traffic lights not detected) runs B1's red from the south; the crossing car has green
+    crosser = Actor(id="v2", kind="vehicle", nav="linear", start_lane="A1B1_1", start_pos=30.0, speed=12.0,
+                    dest_edge="B1C1")
+    m, v = judge(scenario("B0B1_1", 60.0, "B1B2", 40.0, crosser, time_limit=30.0, fault="no_traffic_lights"),
+                 with_replay=True)
+    assert m.actors == ("v2",)
+    assert v.fault is Fault.EGO and "on red" in v.reason
+    assert "counterfactual" not in v.evidence  # a rule saw the ego's own fault: no replay needed
+
+
+def test_minor_road_car_not_yielding_is_other():
+    # the ego drives west along the major road through B0; a linear car turns left out of the minor road
+    minor = Actor(id="v2", kind="vehicle", nav="linear", start_lane="B1B0_2", start_pos=10.0, depart=4.5, speed=8.0,
+                  dest_edge="B0C0")
+    m, v = judge(scenario("C0B0_1", 10.0, "B0A0", 60.0, minor))
+    assert v.fault is Fault.OTHER and "must yield" in v.reason
+    assert v.evidence["other_from"] == "B1B0_2" and v.evidence["ego_from"] == "C0B0_1"
+
+
+def test_ego_failing_to_yield_when_turning_left_is_ego():
+    # the reference ADS's real bug: it turns left at B0 across a car on the major road
+    major = Actor(id="v2", kind="vehicle", nav="linear", start_lane="C0B0_1", start_pos=10.0, depart=6.0, speed=8.0,
+                  dest_edge="B0A0")
+    m, v = judge(scenario("A0B0_1", 10.0, "B0B1", 40.0, major), with_replay=True)
+    assert m.actors == ("v2",)
+    assert v.fault is Fault.EGO and "did not yield" in v.reason
+    assert v.evidence["ego_from"] == "A0B0_2"
+
+
+# ------------------------------------------------------------------ pedestrians
+def test_jaywalker_inside_the_stopping_distance_is_other():
+    jay = Actor(id="p1", kind="pedestrian", nav="linear", start_lane="A0B0_0", start_pos=60.0, speed=2.0, depart=8.0,
+                dest_xy=(68.4, 7.4))
+    m, v = judge(scenario("A0B0_1", 10.0, "B0C0", 40.0, jay, time_limit=30.0))
+    assert (m.oracle, m.kind, m.actors) == ("collision", "pedestrian", ("p1",))
+    assert v.fault is Fault.OTHER and "stopping needed" in v.reason
+    assert v.evidence["gap"] < v.evidence["stopping_distance"]
+    assert v.evidence["visible_frame"] <= v.evidence["entered_frame"]
+
+
+def test_pedestrian_standing_in_the_lane_long_before_is_ego():
+    # the twin: a slow walker steps into the lane 35 m ahead of the ego; an ADS that does not see it
+    # drives into it
+    stander = Actor(id="p1", kind="pedestrian", nav="linear", start_lane="A0B0_0", start_pos=60.0, speed=0.3,
+                    dest_xy=(68.4, 7.4))
+    m, v = judge(scenario("A0B0_1", 10.0, "B0C0", 40.0, stander, time_limit=30.0), ads=BlindADS())
+    assert (m.oracle, m.kind, m.actors) == ("collision", "pedestrian", ("p1",))
+    assert v.fault is Fault.EGO
+    assert v.evidence["gap"] > 3 * v.evidence["stopping_distance"]
+
+
+# ------------------------------------------------------------------ stationary vehicles
+def test_blocked_road_is_other():
+    parked = [Actor(id=f"v{i}", kind="vehicle", nav="immobile", start_lane=lane, start_pos=60.0, speed=0.0)
+              for i, lane in enumerate(("A0B0_1", "A0B0_2"))]
+    m, v = judge(scenario("A0B0_1", 10.0, "B0C0", 40.0, *parked))
+    assert m.oracle == "immobility"
+    assert v.fault is Fault.OTHER and "every lawful way forward is blocked" in v.reason
+    assert v.evidence["lanes"] == {"A0B0_1": "v0", "A0B0_2": "v1"} and v.evidence["free_lanes"] == []
+
+
+def test_waiting_behind_one_parked_car_with_a_free_lane_is_ego():
+    # the reference ADS's real bug: it never passes a stationary car although the next lane is free
+    parked = Actor(id="v0", kind="vehicle", nav="immobile", start_lane="A0B0_1", start_pos=60.0, speed=0.0)
+    m, v = judge(scenario("A0B0_1", 10.0, "B0C0", 40.0, parked), with_replay=True)
+    assert m.oracle == "immobility"
+    assert v.fault is Fault.EGO and "A0B0_2 was free" in v.reason
+    assert "counterfactual" not in v.evidence  # the careful driver does not overtake either
+
+
+def test_queue_behind_a_blocked_queue_is_other():
+    # a car stopped behind a broken-down car: the ego waits behind a queue that cannot move
+    actors = [Actor(id="wreck", kind="vehicle", nav="immobile", start_lane="A0B0_1", start_pos=80.0, speed=0.0),
+              Actor(id="queued", kind="vehicle", nav="maneuver", start_lane="A0B0_1", start_pos=50.0, speed=5.0,
+                    dest_edge="B0C0", maneuvers=(Maneuver(time=0.0, action="speed", value=5.0),))]
+    sc = scenario("A0B0_1", 10.0, "B0C0", 40.0, *actors)
+    ex = execute(sc, oracles=oracles())
+    (m,) = [m for m in ex.misbehaviors if m.oracle == "immobility"]
+    v = attribute(sc, ex.trace, m, load_roadmap(NET))
+    assert v.fault is Fault.OTHER and "queue ahead is itself blocked" in v.reason
+    assert "queued" in v.evidence["queue"] and "wreck" in v.evidence["queue"]
+
+
+def test_rear_ending_a_braking_car_is_ego():
+    leader = Actor(id="v2", kind="vehicle", nav="maneuver", start_lane="A0B0_1", start_pos=40.0, speed=7.0,
+                   dest_edge="B0C0", maneuvers=(Maneuver(time=6.0, action="speed", value=0.0),))
+    m, v = judge(scenario("A0B0_1", 10.0, "B0C0", 60.0, leader), ads=BlindADS(), with_replay=True)
+    assert m.actors == ("v2",)
+    assert v.fault is Fault.EGO and v.evidence["contact_side"] == "front"
+    assert v.evidence["counterfactual"]["same_failure"] is False
+    assert "a careful driver avoided it" in v.reason
+
+
+def test_driving_into_a_parked_car_is_ego():
+    parked = Actor(id="v2", kind="vehicle", nav="immobile", start_lane="A0B0_1", start_pos=60.0, speed=0.0)
+    m, v = judge(scenario("A0B0_1", 10.0, "B0C0", 60.0, parked), ads=BlindADS())
+    assert (m.oracle, m.actors) == ("collision", ("v2",))
+    assert v.fault is Fault.EGO and "stationary vehicle v2" in v.reason
+
+
+# ------------------------------------------------------------------ counterfactual
+def test_counterfactual_same_failure_makes_it_other():
+    # the rammer catches up with a careful driver starting from rest too: the same collision
+    sc = scenario("A0B0_1", 40.0, "B0C0", 40.0, rammer(), time_limit=20.0, fault="no_control")
+    ex = execute(sc, oracles=oracles())
+    (m,) = ex.misbehaviors
+    v = counterfactual(sc, m, replay, Attribution(Fault.EGO, "no rule excused it"))
+    assert v.fault is Fault.OTHER and "could not avoid" in v.reason
+    assert v.evidence["counterfactual"]["same_failure"] is True
+
+
+def test_counterfactual_other_failure_keeps_the_verdict():
+    calls = []
+
+    def fake(sc):
+        calls.append(sc.ads.name)
+        return (Misbehavior("collision", "vehicle", 5, 0.25, (0.0, 0.0), ("someone_else",)),), None
+
+    m = Misbehavior("collision", "vehicle", 5, 0.25, (0.0, 0.0), ("v2",))
+    v = counterfactual(scenario("A0B0_1", 10.0, "B0C0", 40.0), m, fake, Attribution(Fault.EGO, "x"))
+    assert calls == ["careful"] and v.fault is Fault.EGO
+
+
+# ------------------------------------------------------------------ pieces
+def test_signal_state_follows_the_fixed_program():
+    # B0B1 -> B1B2 (link 11 of B1): red 0-45 s, green 45-80 s, yellow 85-88 s (town program)
+    assert signal_state(NET, "B1", 11, 10.0) == "r"
+    assert signal_state(NET, "B1", 11, 50.0) in ("G", "g")
+    assert signal_state(NET, "B1", 11, 86.0) == "y"
+    assert signal_state(NET, "B1", 6, 10.0) == "G"  # A1B1 straight: green first
+
+
+def test_unknown_other_party_is_unclear():
+    sc = scenario("A0B0_1", 10.0, "B0C0", 40.0)
+    ex = execute(sc, oracles=oracles())
+    m = Misbehavior("collision", "vehicle", 10, 0.5, (0.0, 0.0), ("ghost",))
+    assert attribute(sc, ex.trace, m, load_roadmap(NET)).fault is Fault.UNCLEAR
+
+
+@pytest.mark.parametrize("oracle, kind", [("speeding", "speeding"), ("red_light", "red"),
+                                          ("lane_invasion", "opposite_lane")])
+def test_the_ego_own_driving_is_ego(oracle, kind):
+    sc = scenario("A0B0_1", 10.0, "B0C0", 40.0)
+    ex = execute(sc, oracles=oracles())
+    m = Misbehavior(oracle, kind, 50, 2.5, (0.0, 0.0))
+    assert attribute(sc, ex.trace, m, load_roadmap(NET)).fault is Fault.EGO
+
+
+# ------------------------------------------------------------------ the careful driver
+def _seeds():
+    from drivefuzz.scenario.seed import list_seeds
+
+    root = Path(__file__).resolve().parent.parent / "seeds"
+    return [p for n in ("town", "highway", "interchange", "intersection", "roundabout") for p in list_seeds(root / n)]
+
+
+@pytest.mark.parametrize("folder", _seeds(), ids=lambda p: f"{p.parent.name}/{p.name}")
+def test_careful_driver_passes_the_committed_seeds(folder):
+    from drivefuzz.ads import load_ads
+    from drivefuzz.oracle import OracleSettings, Termination
+    from drivefuzz.scenario.sumofiles import read_scenario
+
+    sc = read_scenario(folder)
+    ex = execute(sc, ads=load_ads("careful"), oracles=OracleSettings().instantiate())
+    assert ex.misbehaviors == ()
+    assert ex.termination is Termination.GOAL_REACHED
+
+
+def test_careful_driver_is_slower_in_fog_and_keeps_a_longer_gap():
+    from drivefuzz.ads import load_ads
+    from drivefuzz.scenario import Weather
+
+    sc = scenario("A1B1_1", 10.0, "B1C1", 60.0, time_limit=60.0)
+    fog = sc.model_copy(update={"weather": Weather(fog=90.0)})
+    top = {}
+    for name in ("ego", "careful"):
+        for label, s in (("clear", sc), ("fog", fog)):
+            top[name, label] = execute(s, ads=load_ads(name)).trace["speed"].max()
+    assert top["careful", "fog"] < 0.8 * top["careful", "clear"]
+    assert top["careful", "clear"] <= top["ego", "clear"]
+    # following a slower car: the careful driver's smallest gap is larger
+    leader = Actor(id="v2", kind="vehicle", nav="maneuver", start_lane="A0B0_1", start_pos=30.0, speed=5.0,
+                   dest_edge="B0C0", maneuvers=(Maneuver(time=0.0, action="speed", value=5.0),))
+    gaps = {}
+    for name in ("ego", "careful"):
+        ex = execute(scenario("A0B0_1", 10.0, "B0C0", 80.0, leader, time_limit=40.0), ads=load_ads(name))
+        tr = ex.trace
+        a = tr.actors
+        rows = a.actor == a.ids.index("v2")
+        f = a.frame[rows]
+        gaps[name] = float((a.x[rows] - tr["x"][f])[tr["t"][f] > 15.0].min())
+    assert gaps["careful"] > gaps["ego"] + 2.0
