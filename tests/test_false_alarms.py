@@ -89,3 +89,22 @@ def test_walking_area_over_a_shared_junction_is_not_a_sidewalk_for_the_car_lane(
     f = _berlin_frame(2.5)
     (m,) = o.on_frame(f)
     assert m.kind in ("sidewalk", "off_road")
+
+
+# ------------------------------------------------------------------- seed time limits
+def test_seed_time_limits_let_the_immobility_oracle_fire():
+    import json
+
+    from drivefuzz.scenario import seed
+
+    threshold = ImmobilityOracle().config.threshold
+    assert seed.IMMOBILITY_S == threshold == MissionOracle().config.stop_time
+    floor = threshold + seed.IMMOBILITY_MARGIN_S
+    rmap = load_roadmap(TOWN)
+    assert seed.time_limit_for(rmap, ("A0B0", "B0C0"), 80.0) == floor  # 46 s by distance alone
+    assert seed.time_limit_for(rmap, ("A0B0", "B0B1", "B1C1"), 400.0) > floor  # B1 is signalised
+    root = Path(__file__).resolve().parent.parent / "seeds"
+    limits = {p.parent.relative_to(root).as_posix(): json.loads(p.read_text())["sim"]["time_limit"]
+              for p in root.glob("*/*/scenario.json")}
+    assert len(limits) == 40
+    assert {k: v for k, v in limits.items() if v < floor} == {}
