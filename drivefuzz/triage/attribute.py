@@ -194,7 +194,8 @@ def approach(trace, f: int, other: Track, before: float = 2.0) -> str:
     return "left" if ly > 0 else "right"
 
 
-def _window(trace, f: int, seconds: float) -> slice:
+def frames_before(trace, f: int, seconds: float) -> slice:
+    """The frames from ``seconds`` before ``f`` up to ``f`` (inclusive)."""
     return slice(max(f - int(round(seconds / trace.step_length)), 0), f + 1)
 
 
@@ -202,7 +203,7 @@ def ran_red(trace, f: int, seconds: float = 10.0) -> int | None:
     """The frame (within ``seconds`` before ``f``) at which the ego entered a junction while its light
     showed a stop state, or None."""
     lane, state, dist = trace["lane"], trace["tls_state"], trace["tls_dist"]
-    w = _window(trace, f, seconds)
+    w = frames_before(trace, f, seconds)
     for k in range(max(w.start, 1), w.stop):
         if str(lane[k]).startswith(":") and not str(lane[k - 1]).startswith(":") and str(state[k - 1]) in RED \
                 and dist[k - 1] < 5.0:
@@ -212,7 +213,7 @@ def ran_red(trace, f: int, seconds: float = 10.0) -> int | None:
 
 def lane_changed(trace, f: int, seconds: float = LANE_CHANGE_WINDOW) -> bool:
     """The ego moved between lanes of one normal edge within ``seconds`` before ``f``."""
-    lanes = [str(l) for l in trace["lane"][_window(trace, f, seconds)] if l and not str(l).startswith(":")]
+    lanes = [str(l) for l in trace["lane"][frames_before(trace, f, seconds)] if l and not str(l).startswith(":")]
     return any(a != b and lane_edge(a) == lane_edge(b) for a, b in zip(lanes, lanes[1:]))
 
 
@@ -316,12 +317,12 @@ class _Event:
             return self.ego(f"the ego did not yield to the vehicle {oth.id} at {mine.getJunction().getID()}: its link "
                             f"from {mine.getFromLane().getID()} must yield", decided=True,
                             ego_from=mine.getFromLane().getID())
-        still = float(np.nanmax(oth.speed[_window(trace, f, 2.0)])) <= STATIONARY_SPEED
+        still = float(np.nanmax(oth.speed[frames_before(trace, f, 2.0)])) <= STATIONARY_SPEED
         what = f"stationary {oth.kind}" if still else oth.kind
         return self.ego(f"the ego struck the {what} {oth.id} with its {side} at {self.v:.1f} m/s")
 
     def rule_stationary(self, oth: Track, point, side: str, red) -> Attribution | None:
-        w = _window(self.trace, self.f, 0.5)
+        w = frames_before(self.trace, self.f, 0.5)
         if float(np.max(self.trace["speed"][w])) > STATIONARY_SPEED or red is not None or not self.trace["lane"][self.f]:
             return None
         return self.other(f"the ego was stationary ({self.v:.2f} m/s) when the {oth.kind} {oth.id} struck its {side}")
@@ -338,7 +339,7 @@ class _Event:
             return None
         if str(trace["lane"][f]).startswith(":") and self._ego_must_yield_to(oth):
             return None
-        w = _window(trace, f, 3.0)
+        w = frames_before(trace, f, 3.0)
         decel = -trace["ax"][w]
         peak = float(np.nanmax(decel)) if len(decel) else 0.0
         if peak > COMFORT_DECEL:
@@ -563,7 +564,7 @@ def other_link(trace, rmap, oth: Track, f: int, seconds: float = 10.0):
 def ego_link(trace, rmap, f: int, seconds: float = 15.0):
     """The connection of the ego's junction passage around ``f`` (from its lane channel), or None."""
     lanes = trace["lane"]
-    w = _window(trace, f, seconds)
+    w = frames_before(trace, f, seconds)
     via = None
     k = None
     for j in range(f, w.start - 1, -1):
