@@ -181,6 +181,31 @@ def test_queue_behind_a_blocked_queue_is_other():
     assert "queued" in v.evidence["queue"] and "wreck" in v.evidence["queue"]
 
 
+def test_changing_lanes_into_a_car_alongside_is_ego():
+    # the reference ADS's real bug: its route needs A0B0_2 (left turn at B0), and it changes lanes into
+    # a car driving alongside it there
+    along = Actor(id="v2", kind="vehicle", nav="maneuver", start_lane="A0B0_2", start_pos=2.0, speed=7.7, depart=1.0,
+                  dest_edge="B0C0", maneuvers=(Maneuver(time=0.0, action="speed", value=7.7),))
+    m, v = judge(scenario("A0B0_1", 10.0, "B0B1", 40.0, along), with_replay=True)
+    assert m.actors == ("v2",)
+    assert v.fault is Fault.EGO and "changed lanes into the vehicle v2" in v.reason
+    assert v.evidence["contact_side"] == "left" and "counterfactual" not in v.evidence
+
+
+def test_waiting_for_a_pedestrian_in_the_lane_is_other():
+    # a walker crosses at 0.1 m/s and is still in the ego's lane at the time limit: a mission failure
+    from oracles.mission import MissionOracle
+
+    slow = Actor(id="p1", kind="pedestrian", nav="linear", start_lane="A0B0_0", start_pos=60.0, speed=0.1,
+                 dest_xy=(68.4, 7.4))
+    sc = scenario("A0B0_1", 10.0, "B0C0", 40.0, slow, time_limit=32.0)
+    ex = execute(sc, oracles=[MissionOracle()])
+    (m,) = ex.misbehaviors
+    assert m.oracle == "mission" and ex.trace["speed"][-1] < 0.5
+    v = attribute(sc, ex.trace, m, load_roadmap(NET))
+    assert v.fault is Fault.OTHER and "pedestrian p1 stands in the ego's path" in v.reason
+
+
 def test_rear_ending_a_braking_car_is_ego():
     leader = Actor(id="v2", kind="vehicle", nav="maneuver", start_lane="A0B0_1", start_pos=40.0, speed=7.0,
                    dest_edge="B0C0", maneuvers=(Maneuver(time=6.0, action="speed", value=0.0),))

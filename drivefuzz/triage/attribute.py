@@ -7,6 +7,8 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
 
 - **Rules on the trace** (each gives ``other`` with its evidence, or does not apply):
 
+  0. (``ego``, decided) the ego entered the junction on red; its link had to yield to the other's;
+     it changed lanes into a vehicle alongside (moved sideways towards it more than it came);
   1. *stationary*: the ego stood still when it was struck (and stood where it may: it had not
      just crossed a stop line on red);
   2. *rear*: the ego was struck in its rear half while lawfully in its lane (no lane change in
@@ -21,8 +23,10 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
      the moment the ego could see it (sensor range shortened by fog and rain, field of view,
      line of sight past other vehicles);
   5. *blocked* (immobility and mission): every lane the ego may lawfully use is blocked ahead by a
-     stationary body, or the queue ahead of the ego is itself blocked; a mission time-out while
-     the ego spent most of the run held up behind slower traffic.
+     stationary body (in a junction: the body right ahead), a pedestrian stands in its lane ahead,
+     or the queue ahead of the ego is itself blocked; a mission time-out while the ego spent most
+     of the run held up behind slower traffic. Waiting behind a stationary body with a lawful lane
+     free is the ego's (decided: the careful driver does not overtake either).
 
 - **Avoidability by counterfactual replay**: when no rule excuses the ego and the caller gives
   ``replay``, the same scenario is driven by the careful reference driver (ADS ``careful``,
@@ -217,6 +221,26 @@ def lane_changed(trace, f: int, seconds: float = LANE_CHANGE_WINDOW) -> bool:
     return any(a != b and lane_edge(a) == lane_edge(b) for a, b in zip(lanes, lanes[1:]))
 
 
+def sideways_into(trace, rmap, oth: Track, f: int, side: str, seconds: float = 1.5) -> tuple[float, float] | None:
+    """(ego's, other's) sideways movement [m] towards each other over ``seconds`` before ``f``, measured
+    square to the lane the ego was on then, when the ego moved at least 0.5 m towards ``side`` and
+    more than the other moved towards it (the ego changed lanes into it); else None."""
+    k = frames_before(trace, f, seconds).start
+    lane = str(trace["lane"][k])
+    if not lane or lane.startswith(":") or not rmap.has_lane(lane) or not oth.present(k):
+        return None
+    if lane_edge(str(trace["lane"][f])) != lane_edge(lane):  # turns are right-of-way questions
+        return None
+    g = rmap.geom(lane)
+    sign = 1.0 if side == "left" else -1.0
+    ego = sign * (g.project(float(trace["x"][f]), float(trace["y"][f]))[1]
+                  - g.project(float(trace["x"][k]), float(trace["y"][k]))[1])
+    other = -sign * (g.project(float(oth.x[f]), float(oth.y[f]))[1] - g.project(float(oth.x[k]), float(oth.y[k]))[1])
+    if ego >= 0.5 and ego > other:
+        return ego, other
+    return None
+
+
 def sensor_range(weather) -> float:
     """[m] the reference sensors' range in this weather (fog and rain shorten it; 12 m all round)."""
     return max(100.0 * (1.0 - 0.85 * weather.fog / 100.0) * (1.0 - 0.4 * weather.rain / 100.0), 12.0)
@@ -305,6 +329,12 @@ class _Event:
         self.base.update(other=oth.id, other_kind=oth.kind, other_speed=float(oth.speed[f]), contact_side=side,
                          contact_point=list(point) if point else None)
         red = ran_red(trace, f)
+        if self.rule_stationary(oth, point, side, red) is None and side in ("left", "right") and oth.kind == "vehicle":
+            moved = sideways_into(trace, self.rmap, oth, f, side)
+            if moved is not None:
+                return self.ego(f"the ego changed lanes into the vehicle {oth.id} alongside (it moved {moved[0]:.1f} m "
+                                f"sideways towards it, {oth.id} {round(moved[1], 1) + 0.0:.1f} m)", decided=True,
+                                ego_sideways=moved[0], other_sideways=moved[1])
         for rule in (self.rule_stationary, self.rule_rear, self.rule_right_of_way, self.rule_pedestrian):
             verdict = rule(oth, point, side, red)
             if verdict is not None:
@@ -454,12 +484,14 @@ class _Event:
             return self.ego(f"the ego stood still with nothing blocking its way ({self.mb.oracle}/{self.mb.kind})")
         lanes, free, queue = blocked
         ev = {"lanes": {l: b for l, b in lanes.items()}, "free_lanes": free}
+        own = lanes.get(str(trace["lane"][f]))
+        if own is not None and actor_track(trace, own).kind == "pedestrian":
+            return self.other(f"the pedestrian {own} stands in the ego's path", **ev)
         if not free and lanes:
             what = ", ".join(f"{l} by {b}" for l, b in lanes.items())
             return self.other(f"every lawful way forward is blocked by stationary bodies: {what}", **ev)
         if queue is not None:
             return self.other(f"the queue ahead is itself blocked: {queue}", queue=queue, **ev)
-        own = lanes.get(str(trace["lane"][f]))
         if own is not None:
             return self.ego(f"the ego stayed behind the stationary {own} although {', '.join(free)} was free",
                             decided=True, **ev)
@@ -698,9 +730,12 @@ def blocked_lanes(trace, rmap, f: int, reach: float = 60.0):
     ``queue`` a description when the stationary vehicle ahead of the ego is itself blocked (by a
     stationary body close ahead of it, or at the end of its lane); None off the normal lanes."""
     lane = str(trace["lane"][f])
-    if not lane or lane.startswith(":") or not rmap.has_lane(lane):
-        return None
     dt = trace.step_length
+    if lane.startswith(":"):  # in a junction there is one way forward: the body right ahead
+        ahead = _still_ahead(trace, f, dt)
+        return ({lane: ahead}, [], None) if ahead else None
+    if not lane or not rmap.has_lane(lane):
+        return None
     tracks: dict[str, Track] = {}
 
     def track(aid: str) -> Track:
@@ -731,6 +766,21 @@ def blocked_lanes(trace, rmap, f: int, reach: float = 60.0):
     if not blocked:
         return None
     return blocked, free, queue
+
+
+def _still_ahead(trace, f: int, dt: float, reach: float = 15.0) -> str | None:
+    """A stationary body right ahead of the ego's front (within ``reach`` m, in its width)."""
+    a = trace.actors
+    r = a.rows(f)
+    best = None
+    for j, x, y in zip(a.actor[r], a.x[r], a.y[r]):
+        j = int(j)
+        lx, ly = to_local(trace, f, float(x), float(y))
+        if EGO_LENGTH / 2 < lx < EGO_LENGTH / 2 + reach and abs(ly) < EGO_WIDTH / 2 + a.width[j] / 2:
+            t = actor_track(trace, a.ids[j])
+            if _still(t, f, dt) and (best is None or lx < best[0]):
+                best = (lx, a.ids[j])
+    return best[1] if best else None
 
 
 def _queue_blocked(trace, rmap, lane: str, f: int, bodies, track, dt) -> str | None:
