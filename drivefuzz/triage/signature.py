@@ -31,9 +31,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from drivefuzz.triage.attribute import (
+from drivefuzz.triage.attribute import Attribution
+from drivefuzz.triage.evidence import (
     STATIONARY_SPEED,
-    Attribution,
     actor_track,
     approach,
     contact_point,

@@ -1,0 +1,500 @@
+"""Evidence for attribution and signatures: what the frozen trace and the road map say about one event.
+
+Read by :mod:`drivefuzz.triage.attribute` (its rules) and :mod:`drivefuzz.triage.signature`:
+other parties' tracks, where a contact is on the ego, where the other came from, the ego's red
+lights and lane changes, junction links and their signals and right of way (SUMO's connections,
+link states, response bits and fixed-time programs), when a pedestrian entered the ego's path and
+became visible, and which lanes stationary bodies block. Nothing here gives a verdict.
+
+Units: SI; positions are body centres; headings radians ENU (as in the trace).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+
+import numpy as np
+
+from drivefuzz.geometry import corners
+from drivefuzz.scenario.model import EGO_LENGTH, EGO_WIDTH, lane_edge
+
+#: [m/s^2] braking a following driver must expect; harder braking needs a hazard ahead.
+COMFORT_DECEL = 3.5
+#: [m/s] at or below this the ego counts as stationary.
+STATIONARY_SPEED = 0.1
+#: [s] reaction (perception + actuation) before the brakes act.
+REACTION_TIME = 0.3
+#: [m/s^2] the car's full braking when grip allows (drivefuzz.sim.physics.VehicleParams.max_brake_decel).
+MAX_BRAKE = 9.0
+G = 9.81  #: [m/s^2]
+#: [s] a lane change this recent makes a rear-end the ego's cut-in, not the follower's fault.
+LANE_CHANGE_WINDOW = 3.0
+#: [s] how long a body must have stood still to block a lane.
+STILL_FOR = 5.0
+#: Signal states that mean stop.
+RED = frozenset("rRu")
+# ---------------------------------------------------------------------- the event
+@dataclass
+class Track:
+    """One actor's states by frame (NaN where it was absent)."""
+
+    id: str
+    kind: str  # "vehicle" | "pedestrian"
+    length: float
+    width: float
+    x: np.ndarray
+    y: np.ndarray
+    heading: np.ndarray
+    speed: np.ndarray
+
+    def present(self, f: int) -> bool:
+        return 0 <= f < len(self.x) and not math.isnan(self.x[f])
+
+
+def actor_track(trace, actor_id: str) -> Track | None:
+    """The per-frame states of ``actor_id``, or None if the trace never saw it."""
+    a = trace.actors
+    if actor_id not in a.ids:
+        return None
+    j = a.ids.index(actor_id)
+    rows = a.actor == j
+    n = trace.n_frames
+    out = [np.full(n, np.nan) for _ in range(4)]
+    fr = a.frame[rows]
+    for arr, src in zip(out, (a.x, a.y, a.heading, a.speed)):
+        arr[fr] = src[rows]
+    return Track(actor_id, a.kinds[j], float(a.length[j]), float(a.width[j]), *out)
+
+
+def to_local(trace, f: int, x: float, y: float) -> tuple[float, float]:
+    """(forward, left) [m] of (x, y) in the ego's body frame at frame ``f``."""
+    ex, ey, h = float(trace["x"][f]), float(trace["y"][f]), float(trace["heading"][f])
+    dx, dy = x - ex, y - ey
+    c, s = math.cos(h), math.sin(h)
+    return dx * c + dy * s, -dx * s + dy * c
+
+
+def contact_point(trace, f: int, other: Track) -> tuple[float, float] | None:
+    """Where on the ego the contact is, (forward, left) [m] in its body frame at frame ``f``: the
+    centroid of the overlap of the two bodies, or the ego's point nearest the other body."""
+    from shapely.geometry import Polygon
+    from shapely.ops import nearest_points
+
+    if not other.present(f):
+        return None
+    ego = Polygon(corners(trace["x"][f], trace["y"][f], trace["heading"][f], EGO_LENGTH, EGO_WIDTH))
+    oth = Polygon(corners(other.x[f], other.y[f], other.heading[f], other.length, other.width))
+    inter = ego.intersection(oth)
+    p = inter.centroid if inter.area > 1e-6 else nearest_points(ego, oth)[0]
+    return to_local(trace, f, p.x, p.y)
+
+
+def contact_side(point: tuple[float, float] | None) -> str:
+    """front/rear/left/right of a body-frame contact point (by the ego's normalised extents)."""
+    if point is None:
+        return "none"
+    u, v = point[0] / (EGO_LENGTH / 2), point[1] / (EGO_WIDTH / 2)
+    if abs(u) >= abs(v):
+        return "front" if u > 0 else "rear"
+    return "left" if v > 0 else "right"
+
+
+def approach(trace, f: int, other: Track, before: float = 2.0) -> str:
+    """Where ``other`` came from relative to the ego, ``before`` seconds ahead of frame ``f`` (or when it
+    first appeared): behind/ahead (travelling the ego's way, or standing), oncoming, left/right
+    (crossing; the side it was on). "none" without the other."""
+    k = max(f - int(round(before / trace.step_length)), 0)
+    present = [j for j in range(k, f + 1) if other.present(j)]
+    if not present:
+        return "none"
+    k = present[0]
+    lx, ly = to_local(trace, k, float(other.x[k]), float(other.y[k]))
+    if float(other.speed[k]) > 0.5:
+        dh = abs(wrap_angle(float(other.heading[k]) - float(trace["heading"][k])))
+        if dh >= 3 * math.pi / 4:
+            return "oncoming"
+        if dh > math.pi / 4:
+            return "left" if ly > 0 else "right"
+        return "ahead" if lx > 0 else "behind"
+    if abs(lx) >= abs(ly):
+        return "ahead" if lx > 0 else "behind"
+    return "left" if ly > 0 else "right"
+
+
+def frames_before(trace, f: int, seconds: float) -> slice:
+    """The frames from ``seconds`` before ``f`` up to ``f`` (inclusive)."""
+    return slice(max(f - int(round(seconds / trace.step_length)), 0), f + 1)
+
+
+def ran_red(trace, f: int, seconds: float = 10.0) -> int | None:
+    """The frame (within ``seconds`` before ``f``) at which the ego entered a junction while its light
+    showed a stop state, or None."""
+    lane, state, dist = trace["lane"], trace["tls_state"], trace["tls_dist"]
+    w = frames_before(trace, f, seconds)
+    for k in range(max(w.start, 1), w.stop):
+        if str(lane[k]).startswith(":") and not str(lane[k - 1]).startswith(":") and str(state[k - 1]) in RED \
+                and dist[k - 1] < 5.0:
+            return k
+    return None
+
+
+def lane_changed(trace, f: int, seconds: float = LANE_CHANGE_WINDOW) -> bool:
+    """The ego moved between lanes of one normal edge within ``seconds`` before ``f``."""
+    lanes = [str(l) for l in trace["lane"][frames_before(trace, f, seconds)] if l and not str(l).startswith(":")]
+    return any(a != b and lane_edge(a) == lane_edge(b) for a, b in zip(lanes, lanes[1:]))
+
+
+def sideways_into(trace, rmap, oth: Track, f: int, side: str, seconds: float = 1.5) -> tuple[float, float] | None:
+    """(ego's, other's) sideways movement [m] towards each other over ``seconds`` before ``f``, measured
+    square to the lane the ego was on then, when the ego moved at least 0.5 m towards ``side`` and
+    more than the other moved towards it (the ego changed lanes into it); else None."""
+    k = frames_before(trace, f, seconds).start
+    lane = str(trace["lane"][k])
+    if not lane or lane.startswith(":") or not rmap.has_lane(lane) or not oth.present(k):
+        return None
+    if lane_edge(str(trace["lane"][f])) != lane_edge(lane):  # turns are right-of-way questions
+        return None
+    g = rmap.geom(lane)
+    sign = 1.0 if side == "left" else -1.0
+    ego = sign * (g.project(float(trace["x"][f]), float(trace["y"][f]))[1]
+                  - g.project(float(trace["x"][k]), float(trace["y"][k]))[1])
+    other = -sign * (g.project(float(oth.x[f]), float(oth.y[f]))[1] - g.project(float(oth.x[k]), float(oth.y[k]))[1])
+    if ego >= 0.5 and ego > other:
+        return ego, other
+    return None
+
+
+def sensor_range(weather) -> float:
+    """[m] the reference sensors' range in this weather (fog and rain shorten it; 12 m all round)."""
+    return max(100.0 * (1.0 - 0.85 * weather.fog / 100.0) * (1.0 - 0.4 * weather.rain / 100.0), 12.0)
+
+
+def stopping_distance(v: float, mu: float) -> float:
+    """[m] reaction plus braking distance from ``v`` [m/s] with friction ``mu``."""
+    decel = min(max(mu, 0.05) * G, MAX_BRAKE)
+    return v * REACTION_TIME + v * v / (2.0 * decel)
+
+
+# ---------------------------------------------------------------------- junction links
+@functools.lru_cache(maxsize=16)
+def _programs(net_path: str) -> dict[str, tuple[str, float, list[tuple[float, str]]]]:
+    """tls id -> (type, offset [s], phases (duration [s], state)) of the net file's first program."""
+    out: dict[str, tuple[str, float, list[tuple[float, str]]]] = {}
+    for _ev, el in ET.iterparse(net_path, events=("end",)):
+        if el.tag == "tlLogic":
+            tid = el.get("id", "")
+            if tid not in out:
+                phases = [(float(p.get("duration", "0")), p.get("state", "")) for p in el.findall("phase")]
+                out[tid] = (el.get("type", "static"), float(el.get("offset", "0")), phases)
+            el.clear()
+        elif el.tag in ("edge", "junction", "connection"):
+            el.clear()
+    return out
+
+
+def signal_state(net_path: str, tls: str, link: int, t: float) -> str | None:
+    """The state of link ``link`` of the fixed-time program ``tls`` at simulation time ``t`` [s];
+    None where the program is not fixed-time (the trace does not say what it showed)."""
+    prog = _programs(net_path).get(tls)
+    if prog is None or prog[0] != "static" or not prog[2]:
+        return None
+    _type, offset, phases = prog
+    cycle = sum(d for d, _ in phases)
+    if cycle <= 0:
+        return None
+    tc = (t - offset) % cycle
+    for dur, state in phases:
+        if tc < dur:
+            return state[link] if link < len(state) else None
+        tc -= dur
+    return None
+
+
+def _lane_of(rmap, x: float, y: float, internal: bool) -> str | None:
+    best = None
+    for lane, dist in rmap.net.getNeighboringLanes(x, y, 3.0, includeJunctions=True):
+        if not lane.allows("passenger"):
+            continue
+        if lane.getID().startswith(":") != internal:
+            continue
+        if best is None or dist < best[1]:
+            best = (lane.getID(), dist)
+    return best[0] if best else None
+
+
+def other_link(trace, rmap, oth: Track, f: int, seconds: float = 10.0):
+    """(connection, frame it crossed the stop line) of the junction passage ``oth`` was making at
+    ``f``, judged from its positions; None when it was not in or at the end of a junction."""
+    dt = trace.step_length
+    frames = [k for k in range(max(f - int(seconds / dt), 0), f + 1) if oth.present(k)]
+    if not frames:
+        return None
+    stride = max(int(0.25 / dt), 1)
+    sample = frames[::-1][::stride]  # newest first
+    lane_in, k_last = None, None
+    for k in sample:
+        lane = _lane_of(rmap, float(oth.x[k]), float(oth.y[k]), internal=False)
+        if lane is None:
+            continue
+        g = rmap.geom(lane)
+        pos, lat = g.project(float(oth.x[k]), float(oth.y[k]))
+        if abs(lat) < g.width / 2 and abs(wrap_angle(float(oth.heading[k]) - g.position(pos)[2])) < math.pi / 4:
+            lane_in, k_last = lane, k  # the newest normal lane it drove along
+            break
+    if lane_in is None:
+        return None
+    conns = [c for c in rmap.lane(lane_in).getOutgoing() if c.getViaLaneID()]
+    if not conns:
+        return None
+    g = rmap.geom(lane_in)
+    # the frame its front crossed the end of the lane (the stop line)
+    k_in = None
+    for k in frames:
+        if k < k_last:
+            continue
+        fx = oth.x[k] + math.cos(oth.heading[k]) * oth.length / 2
+        fy = oth.y[k] + math.sin(oth.heading[k]) * oth.length / 2
+        if g.project(float(fx), float(fy))[0] >= g.length - 0.2:
+            k_in = k
+            break
+    if k_in is None:
+        return None  # it had not reached the junction
+    after = [k for k in frames if k >= k_in]
+    pts = np.stack([oth.x[after], oth.y[after]], axis=1)
+
+    def mismatch(c) -> float:
+        shape = np.vstack([np.asarray(rmap.lane(v).getShape())[:, :2] for v in rmap.internal_chain(c.getViaLaneID())]
+                          + [np.asarray(c.getToLane().getShape())[:2, :2]])
+        return float(np.mean([_point_polyline(p, shape) for p in pts]))
+
+    return min(conns, key=mismatch), k_in
+
+
+def ego_link(trace, rmap, f: int, seconds: float = 15.0):
+    """The connection of the ego's junction passage around ``f`` (from its lane channel), or None."""
+    lanes = trace["lane"]
+    w = frames_before(trace, f, seconds)
+    via = None
+    k = None
+    for j in range(f, w.start - 1, -1):
+        if str(lanes[j]).startswith(":"):
+            via, k = str(lanes[j]), j
+        elif via is not None:
+            break
+    if via is None:  # not yet in the junction: the next frames do not exist; use the lane's only links
+        return None
+    prev = next((str(lanes[j]) for j in range(k, w.start - 1, -1) if lanes[j] and not str(lanes[j]).startswith(":")),
+                None)
+    if prev is None:
+        return None
+    for c in rmap.lane(prev).getOutgoing():
+        if c.getViaLaneID() and via in rmap.internal_chain(c.getViaLaneID()):
+            return c
+    return None
+
+
+def wrap_angle(a: float) -> float:
+    return (a + math.pi) % (2 * math.pi) - math.pi
+
+
+def _point_polyline(p: np.ndarray, poly: np.ndarray) -> float:
+    a, b = poly[:-1], poly[1:]
+    d = b - a
+    l2 = np.maximum((d * d).sum(1), 1e-12)
+    t = np.clip(((p - a) * d).sum(1) / l2, 0.0, 1.0)
+    q = a + t[:, None] * d
+    return float(np.min(np.hypot(*(p - q).T)))
+
+
+# ---------------------------------------------------------------------- pedestrians
+def _ego_polyline(trace, k: int, f: int) -> np.ndarray:
+    """The ego's centre path from ``k`` to ``f``, extended half a car ahead of its last pose."""
+    xs, ys = trace["x"][k:f + 1], trace["y"][k:f + 1]
+    h = float(trace["heading"][f])
+    tip = (xs[-1] + math.cos(h) * EGO_LENGTH / 2, ys[-1] + math.sin(h) * EGO_LENGTH / 2)
+    return np.vstack([np.stack([xs, ys], axis=1), [tip]])
+
+
+def path_entry(trace, oth: Track, f: int, seconds: float = 10.0) -> int | None:
+    """The frame from which ``oth`` stayed in the ego's path ahead until ``f`` (the ego's footprint
+    swept from then to ``f``), or None if it was not ahead of the ego's front when it entered."""
+    dt = trace.step_length
+    corridor = EGO_WIDTH / 2 + oth.width / 2 + 0.2
+    k_in = None
+    for k in range(f, max(f - int(seconds / dt), 0) - 1, -1):
+        if not oth.present(k):
+            break
+        poly = _ego_polyline(trace, k, f)
+        p = np.array([oth.x[k], oth.y[k]])
+        if _point_polyline(p, poly) > corridor:
+            break
+        k_in = k
+    if k_in is None:
+        return None
+    lx, _ = to_local(trace, k_in, float(oth.x[k_in]), float(oth.y[k_in]))
+    return k_in if lx > EGO_LENGTH / 2 - 0.3 else None
+
+
+def gap_ahead(trace, k: int, oth: Track) -> float:
+    lx, _ = to_local(trace, k, float(oth.x[k]), float(oth.y[k]))
+    return max(lx - EGO_LENGTH / 2 - oth.length / 2, 0.0)
+
+
+def first_visible(trace, oth: Track, f: int, scenario) -> int | None:
+    """The first frame up to ``f`` at which the reference sensors could see ``oth``: within range
+    (weather), inside the 200 degree field of view or 12 m all round, not hidden behind a vehicle."""
+    from shapely.geometry import LineString, Polygon
+
+    rng = sensor_range(scenario.weather) if scenario is not None else 100.0
+    cos_half = math.cos(math.radians(100.0))
+    a = trace.actors
+    for k in range(f + 1):
+        if not oth.present(k):
+            continue
+        lx, ly = to_local(trace, k, float(oth.x[k]), float(oth.y[k]))
+        d = math.hypot(lx, ly)
+        if d > rng or (d > 12.0 and lx < cos_half * d):
+            continue
+        sight = LineString([(trace["x"][k], trace["y"][k]), (oth.x[k], oth.y[k])])
+        r = a.rows(k)
+        hidden = False
+        for j, x, y, h in zip(a.actor[r], a.x[r], a.y[r], a.heading[r]):
+            if a.ids[int(j)] == oth.id or a.kinds[int(j)] != "vehicle":
+                continue
+            if math.hypot(x - trace["x"][k], y - trace["y"][k]) > d + 5.0:
+                continue
+            if sight.intersects(Polygon(corners(x, y, h, a.length[int(j)], a.width[int(j)]))):
+                hidden = True
+                break
+        if not hidden:
+            return k
+    return None
+
+
+# ---------------------------------------------------------------------- blocked roads
+def _still(track: Track, f: int, dt: float) -> bool:
+    w = track.speed[max(f - int(STILL_FOR / dt), 0):f + 1]
+    w = w[~np.isnan(w)]
+    return len(w) > 0 and float(np.max(w)) <= 0.2
+
+
+def _bodies_on(trace, rmap, lane: str, f: int, s_from: float, reach: float):
+    """(distance along ``lane`` from ``s_from`` [m], actor id, still?) of every body on ``lane`` (and
+    up to 10 m past its end, on the extended centre line) between ``s_from`` and ``s_from + reach``."""
+    g = rmap.geom(lane)
+    a = trace.actors
+    r = a.rows(f)
+    out = []
+    end_x, end_y, end_h = g.position(g.length)
+    for j, x, y in zip(a.actor[r], a.x[r], a.y[r]):
+        j = int(j)
+        pos, lat = g.project(float(x), float(y))
+        if pos >= g.length - 0.01:  # past the end: along the extended last segment
+            dx, dy = x - end_x, y - end_y
+            pos = g.length + dx * math.cos(end_h) + dy * math.sin(end_h)
+            lat = -dx * math.sin(end_h) + dy * math.cos(end_h)
+            if pos > g.length + 10.0:
+                continue
+        if abs(lat) > g.width / 2 + a.width[j] / 2 - 0.3 or not (s_from < pos < s_from + reach):
+            continue
+        out.append((pos - s_from, a.ids[j]))
+    return sorted(out)
+
+
+def blocked_lanes(trace, rmap, f: int, reach: float = 60.0):
+    """What blocks the ego standing at ``f``: ``(lanes, free, queue)`` with ``lanes`` the lawful lanes
+    of its edge whose nearest body ahead stands still (lane -> that body), ``free`` the others, and
+    ``queue`` a description when the stationary vehicle ahead of the ego is itself blocked (by a
+    stationary body close ahead of it, or at the end of its lane); None off the normal lanes."""
+    lane = str(trace["lane"][f])
+    dt = trace.step_length
+    if lane.startswith(":"):  # in a junction there is one way forward: the body right ahead
+        ahead = _still_ahead(trace, f, dt)
+        return ({lane: ahead}, [], None) if ahead else None
+    if not lane or not rmap.has_lane(lane):
+        return None
+    tracks: dict[str, Track] = {}
+
+    def track(aid: str) -> Track:
+        if aid not in tracks:
+            tracks[aid] = actor_track(trace, aid)
+        return tracks[aid]
+
+    ego_pos, _ = rmap.geom(lane).project(float(trace["x"][f]), float(trace["y"][f]))
+    edge = rmap.lane(lane).getEdge()
+    idx = rmap.lane(lane).getIndex()
+    lanes_of = {l.getIndex(): l.getID() for l in edge.getLanes() if l.allows("passenger")}
+    lawful = [lane]
+    for step, left in ((1, True), (-1, False)):
+        i = idx
+        while i + step in lanes_of and rmap.may_change(lanes_of[i], left=left):
+            i += step
+            lawful.append(lanes_of[i])
+    blocked, free, queue = {}, [], None
+    for l in lawful:
+        s_from = ego_pos if l == lane else ego_pos - EGO_LENGTH  # a body alongside blocks a change too
+        bodies = _bodies_on(trace, rmap, l, f, s_from, reach)
+        if bodies and _still(track(bodies[0][1]), f, dt):
+            blocked[l] = bodies[0][1]
+            if l == lane:
+                queue = _queue_blocked(trace, rmap, l, f, bodies, track, dt)
+        else:
+            free.append(l)
+    if not blocked:
+        return None
+    return blocked, free, queue
+
+
+def _still_ahead(trace, f: int, dt: float, reach: float = 15.0) -> str | None:
+    """A stationary body right ahead of the ego's front (within ``reach`` m, in its width)."""
+    a = trace.actors
+    r = a.rows(f)
+    best = None
+    for j, x, y in zip(a.actor[r], a.x[r], a.y[r]):
+        j = int(j)
+        lx, ly = to_local(trace, f, float(x), float(y))
+        if EGO_LENGTH / 2 < lx < EGO_LENGTH / 2 + reach and abs(ly) < EGO_WIDTH / 2 + a.width[j] / 2:
+            t = actor_track(trace, a.ids[j])
+            if _still(t, f, dt) and (best is None or lx < best[0]):
+                best = (lx, a.ids[j])
+    return best[1] if best else None
+
+
+def _queue_blocked(trace, rmap, lane: str, f: int, bodies, track, dt) -> str | None:
+    """Why the stationary leader (first of ``bodies``) cannot go: a stationary body close ahead of
+    it, or it stands at the end of the lane (a queue at the junction)."""
+    g = rmap.geom(lane)
+    d0, lead = bodies[0]
+    lt = track(lead)
+    if lt.kind == "pedestrian":
+        return None
+    if len(bodies) > 1 and bodies[1][0] - d0 < lt.length / 2 + 12.0 and _still(track(bodies[1][1]), f, dt):
+        return f"{lead} stands behind the stationary {bodies[1][1]}"
+    pos, _ = g.project(float(lt.x[f]), float(lt.y[f]))
+    if g.length - pos - lt.length / 2 < 3.0:
+        return f"{lead} waits at the end of {lane}"
+    return None
+
+
+def held_up(trace, f: int, gap: float = 30.0) -> tuple[float, str] | None:
+    """(share of frames, leader) when a slower vehicle was close ahead in the ego's lane for most of
+    the run (at least half of the frames); None otherwise."""
+    a = trace.actors
+    n = min(f + 1, trace.n_frames)
+    count, leaders = 0, {}
+    for k in range(0, n, max(int(0.5 / trace.step_length), 1)):
+        r = a.rows(k)
+        lim = trace["speed_limit"][k]
+        for j, x, y, v in zip(a.actor[r], a.x[r], a.y[r], a.speed[r]):
+            lx, ly = to_local(trace, k, float(x), float(y))
+            if 0 < lx < gap and abs(ly) < 1.5 and (math.isnan(lim) or v < 0.8 * lim):
+                count += 1
+                leaders[a.ids[int(j)]] = leaders.get(a.ids[int(j)], 0) + 1
+                break
+    total = len(range(0, n, max(int(0.5 / trace.step_length), 1)))
+    if total and count / total >= 0.5:
+        return count / total, max(leaders, key=leaders.get)
+    return None
