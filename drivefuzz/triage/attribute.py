@@ -174,7 +174,10 @@ class _Event:
             return self.collision()
         if oracle in ("immobility", "mission"):
             return self.standstill()
-        return self.ego(f"the ego's own driving: {oracle}/{self.mb.kind}")
+        # a red light or the speed limit binds whatever the others do; lane keeping may be lost to wind
+        # or ice, which the counterfactual can show
+        return self.ego(f"the ego's own driving: {oracle}/{self.mb.kind}",
+                        decided=oracle in ("red_light", "speeding"))
 
     # ------------------------------------------------------------------ collisions
     def collision(self) -> Attribution:

@@ -112,6 +112,8 @@ def signature(scenario, trace, misbehavior, rmap, attribution: Attribution) -> S
 def _other_party(mb, attribution: Attribution, trace, f: int) -> str | None:
     if mb.actors:
         return mb.actors[0]
+    if attribution.evidence.get("leader"):  # a time-out behind slower traffic
+        return str(attribution.evidence["leader"])
     lanes = attribution.evidence.get("lanes")
     if isinstance(lanes, dict) and lanes:  # a standstill: the body blocking the ego's own lane, else any
         own = str(trace["lane"][f]) if trace.n_frames else ""
