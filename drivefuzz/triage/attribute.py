@@ -120,8 +120,10 @@ def _json_safe(v):
 def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = None) -> Attribution:
     """The verdict on ``misbehavior`` (see the module docstring for the rules).
 
-    ``replay(scenario) -> (misbehaviors, trace)`` runs a scenario; given, it is used for the
-    counterfactual with the careful driver when no rule excuses the ego.
+    ``replay(scenario) -> (misbehaviors, trace)`` runs a scenario (the caller's executor, oracles and
+    settings); given, it runs the counterfactual with the careful driver (one execution) when no
+    rule decided: none excused the ego and none saw its own fault. Without it, such a verdict is
+    ``ego`` (or ``unclear``) from the rules alone.
     """
     n = trace.n_frames
     if n == 0:
@@ -129,7 +131,7 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
     f = min(max(int(misbehavior.frame), 0), n - 1)
     ev = _Event(scenario, trace, misbehavior, rmap, f)
     verdict = ev.judge()
-    if verdict.fault is Fault.EGO and not ev.decided and replay is not None:
+    if verdict.fault is not Fault.OTHER and not ev.decided and replay is not None:
         return counterfactual(scenario, misbehavior, replay, verdict)
     return verdict
 
