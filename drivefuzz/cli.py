@@ -177,10 +177,10 @@ def _progress_printer():
         if now - last[0] < (0.2 if tty else 10.0):
             return
         last[0] = now
-        best = "-" if p.best_score is None else f"{p.best_score:.1f}"
-        where = (f"seed {p.seed_index}  cycle {p.cycle}" if p.jobs_running == 1
+        best = "-" if p.best_risk is None else f"{p.best_risk:.2f}"
+        where = (f"seed {p.seed_index}  lineage {p.lineage}  cycle {p.cycle}" if p.jobs_running == 1
                  else f"jobs {p.jobs_done}/{p.jobs_total} done, {p.jobs_running} running")
-        line = f"execs {p.execs}  {p.rate:.2f}/s  {where}  best score {best}  findings {p.findings}"
+        line = f"execs {p.execs}  {p.rate:.2f}/s  {where}  best risk {best}  findings {p.findings}"
         click.echo(("\r" + line + "   ") if tty else line, err=True, nl=not tty)
     return show
 
@@ -191,7 +191,7 @@ def _progress_printer():
 @click.option("--resume", "resume_dir", type=click.Path(file_okay=False), help="Continue the campaign in this directory.")
 @click.option("--strategy", type=click.Choice(["all", "congestion", "entropy", "instability", "maneuver", "mix"]),
               default=None, help="Mutation strategy [all].")
-@click.option("--cycles", type=int, default=None, help="Cycles per seed [10].")
+@click.option("--cycles", type=int, default=None, help="Cycles of one lineage at most [10].")
 @click.option("--population", type=int, default=None, help="Mutants per cycle [8].")
 @click.option("--budget", default=None, help="Wall-clock budget of this run, e.g. 90s, 10m, 2h.")
 @click.option("--max-execs", type=int, default=None, help="Stop after N executions (per run: a resume runs N more).")
@@ -199,7 +199,11 @@ def _progress_printer():
 @click.option("--seeds", "seeds_dir", type=click.Path(file_okay=False), help="Seed folder (default seeds/<network>/).")
 @click.option("--ads", "ads_name", default=None, help="ADS plugin under test [ego].")
 @click.option("--ads-option", multiple=True, metavar="K=V", help="ADS option, e.g. fault=speeding.")
-@click.option("--no-feedback", is_flag=True, help="Pick successors at random (the paper's baseline).")
+@click.option("--feedback", type=click.Choice(["risk", "paper", "random"]), default=None,
+              help="How successors are chosen: the risk score, the paper's driving-quality score, or at random [risk].")
+@click.option("--no-feedback", is_flag=True, help="Same as --feedback random (the paper's baseline).")
+@click.option("--single-pass", is_flag=True, help="One lineage per seed, then stop (the default without a budget).")
+@click.option("--report-all", is_flag=True, help="Count incidents (not the ego's fault) as findings too.")
 @click.option("--continue-after-finding", is_flag=True, help="Keep fuzzing a seed after a finding.")
 @click.option("--time-limit", type=float, default=None, help="Simulated seconds per execution (default: the seed's).")
 @click.option("--jobs", "-j", type=int, default=None, help="Seed campaigns at once on a local Dask cluster [1].")
@@ -210,7 +214,7 @@ def _progress_printer():
 @oracle_options
 @handle_errors
 def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_execs, rng_seed, seeds_dir, ads_name,
-         ads_option, no_feedback, continue_after_finding, time_limit, jobs, scheduler, exec_timeout, no_isolation,
+         ads_option, feedback, no_feedback, single_pass, report_all, continue_after_finding, time_limit, jobs, scheduler, exec_timeout, no_isolation,
          oracle_kv, no_oracle, config_file):
     """Fuzz the ADS on NETWORK (a .net.xml). Exit 0: nothing found; 1: misbehaviour found; 2: bad input."""
     from drivefuzz.campaign.fuzz import Campaign, FuzzConfig, load_campaign, parse_duration
@@ -243,7 +247,9 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
                 strategy=strategy or fz.get("strategy", "all"),
                 seed=rng_seed if rng_seed is not None else fz.get("seed", 0),
                 budget_s=parse_duration(budget or fz.get("budget")), max_execs=max_execs or fz.get("max_execs"),
-                feedback=not (no_feedback or fz.get("no_feedback", False)),
+                feedback="random" if (no_feedback or fz.get("no_feedback", False)) else (
+                    feedback or fz.get("feedback", "risk")),
+                single_pass=single_pass or fz.get("single_pass", False),
                 continue_after_finding=continue_after_finding or fz.get("continue_after_finding", False),
                 ads=AdsSpec(name=ads_name or ads_cfg.get("name", "ego"), options=ads_opts),
                 oracles=_oracle_settings(config, oracle_kv, no_oracle),
@@ -280,11 +286,11 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
         findings = _run_campaign(campaign, bool(resume_dir), where, jobs or 1)
     except KeyboardInterrupt:
         findings = campaign.finish()
-        _print_summary(campaign, findings, out_dir)
+        _print_summary(campaign, findings, out_dir, report_all)
         click.echo("aborted", err=True)
         sys.exit(EXIT_ABORTED)
-    _print_summary(campaign, findings, out_dir)
-    sys.exit(_exit_code(findings, bool(campaign.failed_jobs)))
+    _print_summary(campaign, findings, out_dir, report_all)
+    sys.exit(_exit_code(findings + (campaign.incidents if report_all else []), bool(campaign.failed_jobs)))
 
 
 def _exit_code(findings, failed_jobs: bool) -> int:
@@ -329,25 +335,38 @@ def _run_campaign(campaign, resume: bool, where: str | None, jobs: int):
             return campaign.run(resume=resume, client=client)
 
 
-def _print_summary(campaign, findings, out_dir) -> None:
-    from drivefuzz.campaign.fuzz import replay_command
-
+def _print_summary(campaign, findings, out_dir, report_all: bool = False) -> None:
+    """Findings by signature (the ego's fault), then the incidents kept apart, then why the run stopped."""
     p = campaign.progress
     click.echo("", err=True)
-    distinct = len({f.misbehavior.signature() for f in findings})
-    click.echo(f"{p.execs} executions ({p.new_execs} in this run, {p.rate:.2f}/s), {len(findings)} finding(s) "
-               f"({distinct} distinct: oracle, kind, actors, place); output in {out_dir}")
-    if findings:
-        click.echo(f"{'#':>3}  {'oracle/kind':<30} {'time':>7}  {'actors':<14} replay")
-        for i, f in enumerate(findings):
-            m = f.misbehavior
-            when = f"{m.time:>6.2f}s" if m.frame >= 0 else "      -"
-            click.echo(f"{i:>3}  {m.oracle + '/' + m.kind:<30} {when}  {','.join(m.actors) or '-':<14} "
-                       f"{replay_command(f.path)}")
+    incidents = campaign.incidents
+    click.echo(f"{p.execs} executions ({p.new_execs} in this run, {p.rate:.2f}/s); {len(findings)} finding(s) "
+               f"and {len(incidents)} incident(s), one per signature; output in {out_dir}")
+    _print_findings("findings (the ego's fault)" if findings else "", findings)
+    if incidents:
+        _print_findings("incidents (not the ego's fault" + (", reported as findings by --report-all)" if report_all
+                        else "; kept apart, --report-all counts them)"), incidents)
     for si, why in sorted(campaign.failed_jobs.items()):
         click.echo(f"job for seed {si} failed: {why}; its executions so far are saved, --resume retries it", err=True)
+    if campaign.stop_reason:
+        click.echo(f"why it stopped: {campaign.stop_reason}", err=True)
     if p.jobs_done < p.jobs_total:
         click.echo(f"stopped; continue with: drivefuzz fuzz --resume {out_dir}", err=True)
+
+
+def _print_findings(title: str, findings) -> None:
+    from drivefuzz.campaign.fuzz import replay_command
+
+    if not findings:
+        return
+    click.echo(title)
+    click.echo(f"{'#':>3} {'hits':>5}  {'reproduced':<11} {'sim time':>8}  {'signature':<58} replay")
+    for i, f in enumerate(findings):
+        m = f.misbehavior
+        when = f"{m.time:>7.2f}s" if m.frame >= 0 else "       -"
+        rep = f.reproduction or {}
+        rate = f"{rep['reproduced']}/{rep['runs']}" if rep else "-"
+        click.echo(f"{i:>3} {f.hits:>5}  {rate:<11} {when}  {f.label[:58]:<58} {replay_command(f.path)}")
 
 
 def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
@@ -386,6 +405,7 @@ def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
 def campaign(campaign_file, out, resume_dir):
     """Run a batch: every cell of CAMPAIGN_FILE's matrix (networks x strategies x ADS x seeds) on Dask."""
     from drivefuzz.campaign.batch import CampaignFile, cells, load_campaign_file, results_table, write_results
+    from drivefuzz.campaign.config import FINISHED
     from drivefuzz.campaign.cluster import BATCH_SYSTEMS, dask_client
     from drivefuzz.campaign.fuzz import Campaign, FuzzConfig, load_campaign, parse_duration, run_on_dask
     from drivefuzz.oracle import OracleSettings
@@ -429,12 +449,14 @@ def campaign(campaign_file, out, resume_dir):
         else:
             seeds = _seeds_for(network, None, count=c.seeds_per_network)[:c.seeds_per_network]
         cfg = FuzzConfig(cycles=c.cycles, population=c.population, strategy=strategy, seed=seed, budget_s=budget_s,
-                         max_execs=c.max_execs, feedback=not c.no_feedback,
+                         max_execs=c.max_execs, feedback="random" if c.no_feedback else c.feedback,
                          continue_after_finding=c.continue_after_finding, ads=ads,
                          oracles=OracleSettings(settings=spec.oracles), mutation=spec.mutation, quality=spec.quality,
                          time_limit=c.time_limit, exec_timeout_s=c.exec_timeout)
         camp = Campaign(cell_dir, seeds, cfg, argv, on_progress=totals)
-        work.append((camp, camp.prepare(resume=(cell_dir / "manifest.json").exists())))
+        spent = (cell_dir / FINISHED).exists()  # a cell that spent its budget in an earlier run is done
+        pending = camp.prepare(resume=(cell_dir / "manifest.json").exists())
+        work.append((camp, [] if spent else pending))
         campaigns.append(camp)
 
     where = spec.run.where
@@ -479,8 +501,8 @@ def _batch_progress(campaigns):
             total.findings += p.findings
             total.jobs_done += p.jobs_done
             total.jobs_running += p.jobs_running
-            if p.best_score is not None and (total.best_score is None or p.best_score < total.best_score):
-                total.best_score = p.best_score
+            if p.best_risk is not None and (total.best_risk is None or p.best_risk > total.best_risk):
+                total.best_risk = p.best_risk
         show(total)
     return update
 

@@ -147,15 +147,16 @@ def test_linear_and_immobile_pedestrians_walk_and_stand_on_their_lanes(town):
     ex = execute(sc)
     a, n = ex.trace.actors, ex.trace.n_frames
     walker, statue = a.actor == a.ids.index("walker"), a.actor == a.ids.index("statue")
-    assert walker.sum() == n and statue.sum() == n  # both stay in the simulation
-    # the walker's recorded speed is its real one: the scenario's while it walks, 0 once it is there
+    assert statue.sum() == n  # the immobile one stays all along
+    # the walker walks 6 m at 1.2 m/s (5 s), then leaves at its target instead of standing on the road for ever
+    assert 0.9 * 5.0 / sc.sim.step_length < walker.sum() < 1.1 * 5.0 / sc.sim.step_length + 2 < n
     v, x = a.speed[walker], a.x[walker]
     walking = np.flatnonzero(v > 0)
     assert len(walking) > 50
-    assert np.allclose(v[walking[0]:walking[-1]], 1.2)
+    assert np.allclose(v[walking[0]:walking[-1]], 1.2)  # the recorded speed is its real one
     step = np.abs(np.diff(x))[walking[0]:walking[-1] - 1]
     assert np.allclose(step, 1.2 * sc.sim.step_length, atol=1e-6)
-    assert v[-1] == 0.0 and x[-1] == pytest.approx(start[0] - 6.0, abs=0.2)
+    assert x[-1] == pytest.approx(start[0] - 6.0, abs=0.2)
     # the immobile one stands on its sidewalk (SUMO would put a waiting person ~3 m off it)
     g = town.geom("B0B1_0")
     lats = [abs(g.project(px, py)[1]) for px, py in zip(a.x[statue], a.y[statue])]

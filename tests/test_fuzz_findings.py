@@ -2,8 +2,8 @@
 
 - The reference ADS with a fault switched on: the matching oracle fires within a few executions and
   ``drivefuzz replay`` reproduces the finding (exit 0).
-- The clean reference ADS under the entropy strategy: a linear vehicle (one that ignores the ego) runs
-  into it from behind or from the side, the collision oracle names that actor, and the finding replays.
+- The clean reference ADS hit from the side by a linear vehicle (one that ignores the ego) on a road where
+  the ego has the right of way: the collision oracle names that actor, and triage files it as an incident.
 """
 
 from __future__ import annotations
@@ -46,41 +46,53 @@ def test_injected_fault_is_found_and_replays(tmp_path, fault, oracle):
     assert f"reproduced: {oracle}/" in out
 
 
-def test_clean_ads_is_hit_by_a_linear_vehicle_under_entropy(tmp_path, town_scenario):
-    cfg = FuzzConfig(cycles=4, population=2, max_execs=8, seed=4, strategy="entropy", continue_after_finding=True)
-    findings = Campaign(tmp_path / "out", [town_scenario], cfg).run()
-    collisions = [f for f in findings if f.misbehavior.oracle == "collision" and f.misbehavior.kind == "vehicle"]
-    assert collisions, [f"{f.misbehavior.oracle}/{f.misbehavior.kind}" for f in findings]
-    f = collisions[0]
-    sc = read_scenario(f.path)
-    (actor_id,) = f.misbehavior.actors
-    actor = next(a for a in sc.actors if a.id == actor_id)
-    assert actor.nav is NavType.LINEAR and actor.kind.value == "vehicle"
-    verdict = json.loads((f.path / "verdict.json").read_text())
-    assert verdict["misbehaviors"][0]["actors"] == [actor_id]
-    assert "reproduced: collision/vehicle" in _replays(f.path)
+class _Reckless:
+    """A mutator that sends reckless crossers everywhere, also where the ego has the right of way (the real one
+    only sends them where the ego must yield to them: elsewhere no driver could avoid them)."""
+
+    def __new__(cls, town):
+        from drivefuzz.search.mutate import MutationConfig, Mutator
+
+        class Reckless(Mutator):
+            def _conflicts(self, sc):
+                return [o[:6] + ("m", "M") for o in super()._conflicts(sc)]
+
+        return Reckless(town, MutationConfig(linear_rear_share=0.0, linear_cross_share=1.0))
 
 
-def test_cross_traffic_linear_vehicle_hits_the_ego_from_the_side(town):
-    """A linear vehicle on another approach, timed to the junction, runs into the clean ADS's side."""
+def test_reckless_crossers_are_incidents_when_they_run_the_red_and_findings_when_the_ego_must_yield(tmp_path, town):
+    """Linear vehicles on other approaches, timed to the junction, run into the clean ADS's side. The collision
+    oracle names them; triage files the one that entered on red as an incident (not the ego's fault), and the
+    one the ego turned left across without yielding as a finding (the ego's fault: a real bug of the
+    reference ADS). A repeat of an event is one more hit of its folder, with no triage reruns."""
     import random
 
-    from drivefuzz.sim.execute import execute
-    from drivefuzz.search.mutate import MutationConfig, Mutator
     from drivefuzz.oracle import OracleSettings
     from drivefuzz.scenario import ActorKind
+    from drivefuzz.sim.execute import execute
+    from drivefuzz.triage.store import FindingStore, TriageConfig
+
+    def run(scenario):
+        again = execute(scenario, oracles=OracleSettings().instantiate())
+        return tuple(again.misbehaviors), again.trace
 
     seed = read_scenario(SEED_005)
-    mut = Mutator(town, MutationConfig(linear_rear_share=0.0, linear_cross_share=1.0))
-    hits = []
-    for k in range(4):
+    mut = _Reckless(town)
+    store = FindingStore(tmp_path, town, run, TriageConfig(reproduce=1))
+    filed = {}
+    for k in range(5):
         sc = mut.add_actor(seed, random.Random(k), ActorKind.VEHICLE, NavType.LINEAR).scenario
         ex = execute(sc, oracles=OracleSettings().instantiate())
         (actor,) = sc.actors
-        hits += [m for m in ex.misbehaviors if m.oracle == "collision" and m.actors == (actor.id,)]
-        if hits:
-            break
-    assert hits
-    # a side impact: the two headings differ by far more than a rear-end's
-    m = hits[0]
-    assert m.details["relative_speed"] > abs(m.details["other_speed"] - m.details["ego_speed"]) + 0.5
+        (m,) = [m for m in ex.misbehaviors if m.oracle == "collision"]
+        assert m.actors == (actor.id,)
+        # a side impact: the two headings differ by far more than a rear-end's
+        assert m.details["relative_speed"] > abs(m.details["other_speed"] - m.details["ego_speed"]) + 0.5
+        got = store.triage(sc, list(ex.misbehaviors), ex.trace, f"0/0/0/{k}", ex.termination.value)
+        verdict = json.loads((tmp_path / got.rel / "verdict.json").read_text())
+        filed.setdefault(got.fault, []).append((got, verdict["attribution"]["reason"]))
+    (incident, reason), *_ = filed["other"]
+    assert incident.rel.startswith("incidents/") and "on red" in reason
+    (finding, reason), *repeats = filed["ego"]
+    assert finding.rel.startswith("findings/") and "did not yield" in reason
+    assert repeats and all(r.rel == finding.rel and not r.new and r.executions == 0 for r, _ in repeats)

@@ -97,10 +97,13 @@ def _alive(pid: int) -> bool:
 def test_campaign_records_crash_findings_and_goes_on(tmp_path, town_scenario):
     seed = _with_ads(town_scenario, failure="abort", at=0.5)
     cfg = FuzzConfig(cycles=1, population=2, ads=seed.ads)
-    findings = Campaign(tmp_path / "out", [seed, seed], cfg).run()
-    # one crash finding per seed job: the first job's crash did not end the campaign
-    assert [f.misbehavior.oracle for f in findings] == [CRASH, CRASH]
-    assert {f.seed_index for f in findings} == {0, 1}
+    campaign = Campaign(tmp_path / "out", [seed, seed], cfg)
+    findings = campaign.run()
+    # every execution of both seed jobs crashed (the first job's crash did not end the campaign): one finding
+    # (one signature), hit by all 6 (each seed's own run and a cycle of 2)
+    assert [f.misbehavior.oracle for f in findings] == [CRASH] and campaign.progress.execs == 6
+    hits = json.loads((findings[0].path / "hits.json").read_text())
+    assert hits["count"] == findings[0].hits == 6 and {k.split("/")[0] for k in hits["executions"]} == {"0", "1"}
     f = findings[0].path
     verdict = json.loads((f / "verdict.json").read_text())
     assert verdict["error"]["type"] == "SIGABRT" and (f / "routes.rou.xml").exists() and (f / "replay.sh").exists()

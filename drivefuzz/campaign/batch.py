@@ -42,11 +42,12 @@ import itertools
 import json
 import tomllib
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from drivefuzz.campaign.cluster import BATCH_SYSTEMS, BatchSpec
+from drivefuzz.campaign.config import FINISHED
 from drivefuzz.errors import InvalidConfig
 from drivefuzz.search.mutate import MutationConfig
 from drivefuzz.search.quality import QualityConfig
@@ -68,6 +69,7 @@ class CampaignSection(_Strict):
     time_limit: float | None = Field(default=None, gt=0)
     continue_after_finding: bool = False
     no_feedback: bool = False
+    feedback: Literal["risk", "paper", "random"] = "risk"
     exec_timeout: float = Field(default=300.0, gt=0)
 
 
@@ -162,7 +164,8 @@ def results_table(out: Path, spec: CampaignFile) -> list[dict[str, Any]]:
         d = out / "cells" / name
         row: dict[str, Any] = {"cell": name, "network": Path(network).name, "strategy": strategy, "ads": ads.name,
                                "ads_options": json.dumps(ads.options, sort_keys=True), "seed": seed,
-                               "execs": 0, "findings": 0, "distinct": 0, "by_oracle": "", "status": "not started"}
+                               "execs": 0, "findings": 0, "distinct": 0, "incidents": 0, "by_oracle": "",
+                               "status": "not started"}
         if (d / "index.sqlite").exists():
             db = sqlite3.connect(d / "index.sqlite")
             row["execs"] = db.execute("SELECT COUNT(*) FROM executions").fetchone()[0]
@@ -171,15 +174,20 @@ def results_table(out: Path, spec: CampaignFile) -> list[dict[str, Any]]:
 
             found = [load_finding(f) for f in sorted((d / "findings").iterdir())
                      if not f.name.startswith(".") and (f / "verdict.json").exists()]  # not half-written ones
-            row["findings"] = len(found)
-            row["distinct"] = len({f.misbehavior.signature() for f in found})
+            row["findings"] = sum(json.loads(f.path.joinpath("hits.json").read_text())["count"]
+                                  if f.path.joinpath("hits.json").exists() else 1 for f in found)
+            row["distinct"] = len(found)  # one folder per signature
+            row["incidents"] = sum(1 for f in (d / "incidents").glob("*/verdict.json")) if (d / "incidents").is_dir() else 0
             counts: dict[str, int] = {}
             for f in found:
                 counts[f.misbehavior.oracle] = counts.get(f.misbehavior.oracle, 0) + 1
             row["by_oracle"] = " ".join(f"{k}:{v}" for k, v in sorted(counts.items()))
             manifest = json.loads((d / "manifest.json").read_text())
             done = sum((d / "jobs" / f"{i:03d}" / "summary.json").exists() for i in range(len(manifest["seeds"])))
-            row["status"] = "done" if done == len(manifest["seeds"]) else f"{done}/{len(manifest['seeds'])} seeds done"
+            if (d / FINISHED).exists():  # the run ended by spending its budget (or its single pass)
+                row["status"] = "done"
+            else:
+                row["status"] = "done" if done == len(manifest["seeds"]) else f"{done}/{len(manifest['seeds'])} seeds done"
         rows.append(row)
     return rows
 
@@ -196,7 +204,7 @@ def write_results(out: Path, rows: list[dict[str, Any]]) -> None:
     w.writeheader()
     w.writerows(rows)
     atomic_write_text(out / "results.csv", buf.getvalue())
-    cols = ["cell", "execs", "findings", "distinct", "by_oracle", "status"]
+    cols = ["cell", "execs", "findings", "distinct", "incidents", "by_oracle", "status"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(str(r[c]) for c in cols) + " |" for r in rows]
     atomic_write_text(out / "results.md", "\n".join(lines) + "\n")

@@ -16,7 +16,9 @@ Output directory (a person opens it without drivefuzz)::
     index.sqlite            one row per execution; written only by the client, rebuilt from the
                             journals on --resume (it is derived data: SQLite must not be shared over NFS)
     corpus/<hash>/          every successor scenario
-    findings/NNN-KK-<oracle>-<hash>/   SUMO files, scenario.json, trace/, verdict.json, replay.sh
+    findings/<signature>-<oracle>/   one per signature the ego is to blame for: SUMO files, scenario.json, trace/,
+                            verdict.json (attribution, signature, reproduction rate), hits.json, replay.sh
+    incidents/<signature>-<oracle>/  the same for events that were not the ego's fault
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import json
 import os
 import re
 import shlex
+import shutil
 import sqlite3
 import time
 from dataclasses import dataclass, field
@@ -33,28 +36,30 @@ from typing import Any, Callable, Sequence
 
 import drivefuzz
 from drivefuzz.errors import InvalidConfig
-from drivefuzz.campaign.config import FuzzConfig  # noqa: F401  (re-exported)
+from drivefuzz.campaign.config import FINISHED, FuzzConfig  # noqa: F401  (FuzzConfig re-exported)
 from drivefuzz.campaign.job import STOP_FILE, SeedJob, job_dir, run_seed_job
 from drivefuzz.oracle import Misbehavior, OracleSettings
 from drivefuzz.scenario import AdsSpec, Scenario
 from drivefuzz.storage import atomic_write_json
+from drivefuzz.triage.store import write_hits
 from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
 
 SCHEMA = """
 CREATE TABLE IF NOT EXISTS executions (
     exec_id INTEGER PRIMARY KEY,
     key TEXT UNIQUE,
-    seed_index INTEGER, cycle INTEGER, member INTEGER,
+    seed_index INTEGER, lineage INTEGER, cycle INTEGER, member INTEGER,
     scenario_hash TEXT, parent_hash TEXT, mutation TEXT, retries INTEGER,
-    score REAL, components TEXT, verdict TEXT, termination TEXT, finding TEXT,
+    score REAL, risk REAL, components TEXT, verdict TEXT, termination TEXT, finding TEXT,
+    incident TEXT, signature TEXT, fault TEXT,
     frames INTEGER, wall_time REAL, timings TEXT, pid INTEGER
 );
 """
 #: (column, journal record key) of the index's rows
-COLUMNS = (("key", "key"), ("seed_index", "seed_index"), ("cycle", "cycle"), ("member", "member"),
-           ("scenario_hash", "hash"), ("parent_hash", "parent"), ("mutation", "mutation"), ("retries", "retries"),
-           ("score", "score"), ("components", "components"), ("verdict", "verdict"), ("termination", "termination"),
-           ("finding", "finding"), ("frames", "frames"), ("wall_time", "wall_time"), ("timings", "timings"),
+COLUMNS = (("key", "key"), ("seed_index", "seed_index"), ("lineage", "lineage"), ("cycle", "cycle"),
+           ("member", "member"), ("scenario_hash", "hash"), ("parent_hash", "parent"), ("mutation", "mutation"),
+           ("retries", "retries"), ("score", "score"), ("risk", "risk"), ("components", "components"), ("verdict", "verdict"), ("termination", "termination"),
+           ("finding", "finding"), ("incident", "incident"), ("signature", "signature"), ("fault", "fault"), ("frames", "frames"), ("wall_time", "wall_time"), ("timings", "timings"),
            ("pid", "pid"))
 _INSERT = (f"INSERT OR IGNORE INTO executions ({', '.join(c for c, _ in COLUMNS)}) "
            f"VALUES ({', '.join('?' * len(COLUMNS))})")
@@ -62,21 +67,34 @@ _INSERT = (f"INSERT OR IGNORE INTO executions ({', '.join(c for c, _ in COLUMNS)
 
 @dataclass
 class Finding:
+    """A finding (or an incident) folder: one signature, its representative execution and its verdict."""
+
     path: Path
     misbehavior: Misbehavior
     scenario_hash: str
     seed_index: int
     key: str
+    signature: dict[str, Any] = field(default_factory=dict)
+    attribution: dict[str, Any] | None = None
+    reproduction: dict[str, Any] | None = None
+    hits: int = 1  # executions that hit this signature
+
+    @property
+    def label(self) -> str:
+        m = self.misbehavior
+        return self.signature.get("label") or f"{m.oracle}/{m.kind}"
 
 
 @dataclass
 class Progress:
     execs: int = 0  # every execution of the campaign, including those before a resume
     new_execs: int = 0  # executions of this run (the rate's numerator)
-    findings: int = 0
+    findings: int = 0  # distinct signatures the ego is to blame for
+    incidents: int = 0  # distinct signatures it is not
     seed_index: int = 0
     cycle: int = 0
-    best_score: float | None = None
+    lineage: int = 0
+    best_risk: float | None = None  # the highest risk score of any execution so far
     jobs_total: int = 0
     jobs_done: int = 0
     jobs_running: int = 0
@@ -105,7 +123,7 @@ def replay_command(finding_dir: Path) -> str:
 def load_finding(path: Path) -> Finding:
     v = json.loads((path / "verdict.json").read_text())
     return Finding(path, Misbehavior.from_dict(v["misbehaviors"][0]), v["scenario_hash"], v.get("seed_index", 0),
-                   v.get("key", ""))
+                   v.get("key", ""), v.get("signature") or {}, v.get("attribution"), v.get("reproduction"))
 
 
 class Campaign:
@@ -120,17 +138,23 @@ class Campaign:
         self.on_progress = on_progress or (lambda p: None)
         self.progress = Progress(jobs_total=len(self.seeds))
         self.findings: list[Finding] = []
+        self.incidents: list[Finding] = []  # not the ego's fault: kept apart, not counted as findings
         self.failed_jobs: dict[int, str] = {}  # seed index -> why its job failed (Dask gave up on it)
         self.stop_requested = False
+        self.stop_reason = ""  # why the run ended, for the summary
         self._offsets: dict[int, int] = {}
         self._deadline: float | None = None
+        self._rounds: dict[int, int] = {}  # Dask submissions per seed job
 
     # ------------------------------------------------------------- directory
     def prepare(self, resume: bool) -> list[int]:
         """Create (or reopen) the directory and rebuild the index; return the seed indices still to run."""
         self.out.mkdir(parents=True, exist_ok=True)
-        for sub in ("corpus", "findings", "jobs"):
+        for sub in ("corpus", "findings", "incidents", "jobs"):
             (self.out / sub).mkdir(exist_ok=True)
+        for sub in ("findings", "incidents"):  # folders half-written when a job was killed (no job runs yet)
+            for leftover in (self.out / sub).glob(".*"):
+                shutil.rmtree(leftover, ignore_errors=True)
         if not resume or not (self.out / "manifest.json").exists():
             for i, sc in enumerate(self.seeds):
                 write_scenario(sc, self.out / "seeds" / f"{i:03d}")
@@ -148,7 +172,7 @@ class Campaign:
         self.db = sqlite3.connect(self.out / "index.sqlite")
         self.db.executescript("DROP TABLE IF EXISTS executions;" + SCHEMA)  # derived data: rebuilt from journals
         self._offsets = {}
-        self.findings, self.progress.execs, self.progress.findings = [], 0, 0
+        self.findings, self.incidents, self.progress.execs, self.progress.findings = [], [], 0, 0
         self.poll(quiet=True)
         self.progress.new_execs = 0
         self.progress.started = time.monotonic()
@@ -191,22 +215,31 @@ class Campaign:
             return
         p = self.progress
         p.execs += 1
-        p.seed_index, p.cycle = rec["seed_index"], rec["cycle"]
-        if rec.get("score") is not None and (p.best_score is None or rec["score"] < p.best_score):
-            p.best_score = rec["score"]
-        if rec.get("finding"):
-            path = self.out / rec["finding"]
-            if path.is_dir() and all(f.path != path for f in self.findings):
-                self.findings.append(load_finding(path))
-                p.findings = len(self.findings)
+        p.seed_index, p.cycle, p.lineage = rec["seed_index"], rec["cycle"], rec.get("lineage", 0)
+        if rec.get("risk") is not None and (p.best_risk is None or rec["risk"] > p.best_risk):
+            p.best_risk = rec["risk"]
+        for col, kept in (("finding", self.findings), ("incident", self.incidents)):
+            if rec.get(col):
+                path = self.out / rec[col]
+                known = next((f for f in kept if f.path == path), None)
+                if known is not None:
+                    known.hits += 1
+                elif (path / "verdict.json").is_file():
+                    kept.append(load_finding(path))
+        p.findings, p.incidents = len(self.findings), len(self.incidents)
 
     # ------------------------------------------------------------------ budget
     def out_of_budget(self) -> bool:
         if self.stop_requested:
+            self.stop_reason = self.stop_reason or "stopped on request (Ctrl-C)"
             return True
         if self._deadline is not None and time.monotonic() >= self._deadline:
+            self.stop_reason = self.stop_reason or f"the time budget of {_duration(self.cfg.budget_s)} was spent"
             return True
-        return self.cfg.max_execs is not None and self.progress.new_execs >= self.cfg.max_execs
+        if self.cfg.max_execs is not None and self.progress.new_execs >= self.cfg.max_execs:
+            self.stop_reason = self.stop_reason or f"--max-execs {self.cfg.max_execs} executions were run"
+            return True
+        return False
 
     def request_stop(self) -> None:
         (self.out / STOP_FILE).touch()
@@ -226,25 +259,52 @@ class Campaign:
         if not hasattr(self, "db"):  # stopped before it was prepared
             return self.findings
         self.poll()
-        self.findings.sort(key=lambda f: f.path.name)
+        hits: dict[str, list[str]] = {}
+        for rel, key in self.db.execute("SELECT COALESCE(finding, incident), key FROM executions WHERE "
+                                        "finding IS NOT NULL OR incident IS NOT NULL ORDER BY exec_id"):
+            hits.setdefault(rel, []).append(key)
+        write_hits(self.out, hits)
+        if not self.stop_reason:
+            if self.failed_jobs and len(self.failed_jobs) == self.progress.jobs_total:
+                self.stop_reason = "every seed job failed"
+            elif self.cfg.one_lineage_per_seed:
+                self.stop_reason = ("single pass done: one lineage per seed" + ("" if self.cfg.single_pass else
+                                    " (give --budget or --max-execs to keep fuzzing)"))
+            else:
+                self.out_of_budget()
+        if self.stop_reason and not self.stop_requested and not self.failed_jobs:
+            atomic_write_json(self.out / FINISHED, {"reason": self.stop_reason, "executions": self.progress.execs})
+        self.findings.sort(key=lambda f: f.key)  # in the order they were found (seed, lineage, cycle, member)
+        self.incidents.sort(key=lambda f: f.key)
         return self.findings
 
     def _run_here(self, pending: list[int]) -> None:
-        for si in pending:
-            if self.out_of_budget():
-                break
-            self.progress.jobs_running = 1
-            summary = SeedJob(self.out, si).run(stop=self.out_of_budget, on_record=lambda rec: self.poll())
-            self.progress.jobs_running = 0
-            if summary["status"] == "done":
-                self.progress.jobs_done += 1
+        """Round robin over the seeds, one lineage each turn, until every job is done or the budget is spent."""
+        pending = list(pending)
+        while pending and not self.out_of_budget():
+            for si in list(pending):
+                if self.out_of_budget():
+                    break
+                self.progress.jobs_running = 1
+                summary = SeedJob(self.out, si).run(stop=self.out_of_budget, on_record=lambda rec: self.poll())
+                self.progress.jobs_running = 0
+                if summary["status"] == "done":
+                    self.progress.jobs_done += 1
+                    pending.remove(si)
+                elif summary["status"] == "stopped":
+                    return
 
     def submit(self, client, pending: list[int]) -> dict[Any, int]:
         """Submit the pending seed jobs to Dask; the budget clock starts when this is called."""
         self._deadline = None if self.cfg.budget_s is None else time.monotonic() + self.cfg.budget_s
+        return {self.resubmit(client, si): si for si in pending}
+
+    def resubmit(self, client, si: int):
+        """One more round (lineage) of seed job ``si`` on Dask."""
+        self._rounds[si] = self._rounds.get(si, 0) + 1
         tag = f"{self.out.resolve().name}-{os.getpid()}"
-        return {client.submit(run_seed_job, str(self.out.resolve()), si, key=f"drivefuzz-{tag}-seed{si:03d}",
-                              pure=False, retries=1): si for si in pending}
+        return client.submit(run_seed_job, str(self.out.resolve()), si,
+                             key=f"drivefuzz-{tag}-seed{si:03d}-round{self._rounds[si]}", pure=False, retries=1)
 
 
 def run_on_dask(client, work: list[tuple[Campaign, list[int]]], max_running: int | None = None) -> None:
@@ -291,6 +351,8 @@ def run_on_dask(client, work: list[tuple[Campaign, list[int]]], max_running: int
                     continue
                 if summary["status"] == "done":
                     campaign.progress.jobs_done += 1
+                elif summary["status"] == "yielded" and not campaign.out_of_budget():
+                    active[campaign.resubmit(client, si)] = (campaign, si)
             busy = {key for keys in client.processing().values() for key in keys}
             for campaign in list(running):
                 left = [f for f, (c, _) in active.items() if c is campaign]
@@ -320,3 +382,11 @@ def load_campaign(out: str | os.PathLike) -> tuple[list[Scenario], FuzzConfig, l
         raise InvalidConfig(str(path), None, f"unreadable campaign manifest ({type(exc).__name__}: {exc})",
                             "a manifest.json written by 'drivefuzz fuzz'") from None
     return seeds, cfg, manifest.get("command", [])
+
+
+def _duration(seconds: float | None) -> str:
+    if seconds is None:
+        return "none"
+    m, s = divmod(int(round(seconds)), 60)
+    h, m = divmod(m, 60)
+    return (f"{h}h" if h else "") + (f"{m}m" if m else "") + (f"{s}s" if s or not (h or m) else "")

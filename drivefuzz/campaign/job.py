@@ -1,4 +1,4 @@
-"""One seed's fuzz campaign (the paper's Algorithm 1 for one seed): the unit of work of a campaign.
+"""One seed's fuzz campaign: the unit of work of a campaign, run one lineage (a *round*) at a time.
 
 A job runs in the campaign's own process (``--jobs 1``) or in a Dask worker. It
 is idempotent and resumable, and it persists everything itself, inside the
@@ -6,23 +6,30 @@ campaign directory, before it returns; its return value is only a small summary.
 A worker that dies therefore loses at most the execution it was running, and
 the job that Dask starts again elsewhere continues from its journal.
 
-For each of ``cycles`` cycles, ``generate`` adds one actor or puddle to the
-current scenario, then ``population`` mutants are executed. A mutant that makes
-an oracle fire (or crashes, hangs or breaks a plugin, see :mod:`drivefuzz.sim.simhost`)
-is a finding, which ends the seed's campaign unless ``continue_after_finding``.
-Otherwise the mutant with the lowest driving-quality score becomes the next
-scenario (a random one with ``feedback=False``, the paper's baseline).
+First the seed runs as it is: its risk is the baseline that every mutant's risk is measured against
+(and a faulty ADS may already fail there). Then lineages, the paper's Algorithm 1 inside the schedule of
+:mod:`drivefuzz.search.schedule`: each cycle, ``population`` members are made from the current scenario
+(:meth:`drivefuzz.search.mutate.Mutator.successor`: a targeted move of the riskiest actor, or a new
+component of their own from the catalogue or the strategy) and executed; the member with the highest
+feedback value (risk by default; the paper's score, or a random member as the baseline) that found
+nothing becomes the next current scenario and, when it raised the lineage's best, a corpus entry.
+Oracles' reports go to :class:`drivefuzz.triage.store.FindingStore` (attribution, signature, one folder
+per signature). A lineage ends after ``cycles`` cycles, after ``patience`` cycles without a new best,
+or at a finding (unless ``continue_after_finding``); then :meth:`SeedJob.run` returns "yielded" and the
+campaign gives the next seed its turn, until the budget is spent. Without a budget (or with
+``single_pass``) each seed runs one lineage and its job is "done".
 
-Determinism: every random draw comes from ``Random(f"{seed}/{seed_index}/{cycle}/...")``,
-so a job is a pure function of its seed scenario and the configuration, and a
-resumed job re-creates exactly the executions it had not finished.
+Determinism: every random draw comes from ``Random(f"{seed}/{seed_index}/{lineage}/{cycle}/{parent hash}/...")``,
+so two configurations that choose different successors have different futures, and a job is a pure
+function of its seed scenario, the configuration and the executions' results; a resumed job re-creates
+exactly the executions it had not finished.
 
 Files of job ``NNN`` (the seed index) under ``jobs/NNN/``::
 
     journal.jsonl     append-only, fsync'd: {"event": "start", key, pid} before an
                       execution (attributes a crash to its scenario), then
                       {"event": "end", ...the execution's record} after it
-    checkpoint.json   the cycle reached and the current scenario (atomic)
+    checkpoint.json   the schedule (corpus, the current lineage) and the seed's baseline risk (atomic)
     summary.json      written last, when the job has finished its seed: the DONE marker
     owner             the attempt that owns the job: an older attempt that is still running
                       (its client died, or Dask lost touch with its worker) stops at its next execution
@@ -30,9 +37,10 @@ Files of job ``NNN`` (the seed index) under ``jobs/NNN/``::
 Budgets: ``--max-execs`` counts the executions of one run of the campaign (a resume
 is a new run). Each execution first claims a ticket, a file ``budget/run<R>/<n>``
 created with O_EXCL, so parallel jobs never run more than the budget between them.
+Triage reruns (counterfactual, reproduction) are not search executions and take no ticket.
 
-Findings go to ``findings/NNN-KK-<oracle>-<hash>/`` and successors to ``corpus/<hash>/``.
-A file ``STOP`` in the campaign directory makes every job return after its
+Findings go to ``findings/<signature>-<oracle>/``, incidents to ``incidents/...`` and successors to
+``corpus/<hash>/``. A file ``STOP`` in the campaign directory makes every job return after its
 current execution (the budget ran out, or the user pressed Ctrl-C).
 """
 
@@ -49,7 +57,8 @@ from typing import Any, Callable
 import drivefuzz
 from drivefuzz.campaign.config import FuzzConfig
 from drivefuzz.oracle import Misbehavior
-from drivefuzz.storage import atomic_dir, atomic_write_json, atomic_write_text
+from drivefuzz.storage import atomic_write_json, atomic_write_text
+from drivefuzz.triage.store import FindingStore, TriageConfig
 from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
 
 STOP_FILE = "STOP"
@@ -83,11 +92,6 @@ def _append(path: Path, rec: dict[str, Any], after_kill: bool = False) -> None:
         os.fsync(fh.fileno())
 
 
-def replay_script() -> str:
-    return ("#!/bin/sh\n# Runs this finding again and checks it reproduces.\n"
-            'cd "$(dirname "$0")" && exec drivefuzz replay .\n')
-
-
 class SeedJob:
     """The campaign of one seed inside the campaign directory ``out``."""
 
@@ -104,30 +108,6 @@ class SeedJob:
         self.findings: list[str] = []
 
     # ---------------------------------------------------------------- files
-    def _save_finding(self, scenario, misbehaviors: list[Misbehavior], key: str, trace=None,
-                      termination: str = "", extra: dict[str, Any] | None = None) -> str:
-        h = scenario.content_hash()
-        for rel in self.findings:  # a resumed job re-running an execution whose finding was saved
-            if rel.endswith(h):
-                return rel
-        m = misbehaviors[0]
-        rel = f"findings/{self.si:03d}-{len(self.findings):02d}-{m.oracle}-{h}"
-        with atomic_dir(self.out / rel) as tmp:
-            write_scenario(scenario, tmp)
-            if trace is not None:
-                trace.save(tmp / "trace")
-            atomic_write_json(tmp / "verdict.json", {
-                "misbehaviors": [x.as_dict() for x in misbehaviors], "termination": termination,
-                "scenario_hash": h, "seed_index": self.si, "key": key,
-                "frames": None if trace is None else trace.n_frames,
-                "oracles": self.cfg.oracles.settings, "exec_timeout_s": self.cfg.exec_timeout_s,
-                "drivefuzz": drivefuzz.__version__, **(extra or {}),
-            })
-            atomic_write_text(tmp / "replay.sh", replay_script())
-            os.chmod(tmp / "replay.sh", 0o755)
-        self.findings.append(rel)
-        return rel
-
     def _owned(self) -> bool:
         try:
             return (self.dir / "owner").read_text() == self.token
@@ -150,20 +130,15 @@ class SeedJob:
                 continue
         return False
 
-    def _sweep(self) -> None:
-        """Remove this job's half-written finding folders (a kill inside atomic_dir)."""
-        import shutil
+    def _corpus_ref(self, scenario) -> str:
+        """The scenario's folder under ``corpus/`` (written once; the hash names its content)."""
+        ref = f"corpus/{scenario.content_hash()}"
+        if not (self.out / ref / "scenario.json").exists():
+            write_scenario(scenario, self.out / ref)
+        return ref
 
-        for leftover in (self.out / "findings").glob(f".{self.si:03d}-*"):
-            shutil.rmtree(leftover, ignore_errors=True)
-
-    def _checkpoint(self, cycle: int, current) -> None:
-        ref = None
-        if current is not None:
-            ref = f"corpus/{current.content_hash()}"
-            if not (self.out / ref / "scenario.json").exists():
-                write_scenario(current, self.out / ref)
-        atomic_write_json(self.dir / "checkpoint.json", {"cycle": cycle, "current": ref})
+    def _checkpoint(self, schedule, baseline: dict[str, Any] | None) -> None:
+        atomic_write_json(self.dir / "checkpoint.json", {"schedule": schedule.to_json(), "baseline": baseline})
 
     # ------------------------------------------------------------------ run
     def run(self, stop: Callable[[], bool] | None = None,
@@ -183,7 +158,6 @@ class SeedJob:
             return {"seed_index": self.si, "status": "stopped", "execs": None, "findings": [], "pid": os.getpid()}
         self.token = f"{os.uname().nodename}:{os.getpid()}:{uuid.uuid4().hex}"
         atomic_write_text(self.dir / "owner", self.token)
-        self._sweep()
         history = read_journal(self.journal)
         done = {r["key"]: r for r in history if r.get("event") == "end"}
         attempts = sum(1 for r in history if r.get("event") == "attempt") + 1
@@ -201,9 +175,11 @@ class SeedJob:
         return summary
 
     def _loop(self, done: dict[str, dict], should_stop, on_record) -> str:
-        from drivefuzz.search.mutate import Mutator
+        """Run lineages until this round ends: "yielded" (a lineage ended and the budget goes on), "done"
+        (single pass: the seed's one lineage ended), "stopped" or "superseded"."""
         from drivefuzz.scenario.roadmap import load_roadmap
-        from drivefuzz.sim.simhost import OK
+        from drivefuzz.search.mutate import Mutator
+        from drivefuzz.search.schedule import Schedule, pick_successor
 
         cfg = self.cfg
         seed_sc = self.seed
@@ -213,86 +189,129 @@ class SeedJob:
         mutator = Mutator(load_roadmap(seed_sc.network_path()), cfg.mutation)
         ckpt_path = self.dir / "checkpoint.json"
         ckpt = json.loads(ckpt_path.read_text()) if ckpt_path.exists() else {}
-        current, first_cycle = seed_sc, 0
-        if ckpt.get("current"):
-            current = load_scenario(self.out / ckpt["current"]).model_copy(update={"ads": cfg.ads})
-        first_cycle = ckpt.get("cycle", 0)
+        schedule = Schedule.from_json(cfg.schedule, ckpt.get("schedule"), cfg.feedback)
         runner = _Runner(cfg)
-        for cycle in range(first_cycle, cfg.cycles):
-            t0 = time.perf_counter()
-            gen = mutator.generate(current, cfg.strategy, random.Random(f"{cfg.seed}/{self.si}/{cycle}/generate"))
-            t_generate = time.perf_counter() - t0
-            population: list[tuple[float, Any]] = []
-            for member in range(cfg.population):
-                key = f"{self.si}/{cycle}/{member}"
-                t0 = time.perf_counter()
-                mut = mutator.mutate(gen.scenario, random.Random(f"{cfg.seed}/{self.si}/{cycle}/{member}"))
-                t_mutate = time.perf_counter() - t0 + (t_generate if member == 0 else 0.0)
-                child = mut.scenario
-                if key in done:  # finished before a stop or a kill: reuse its result
-                    rec = done[key]
-                    if rec["score"] is not None:
-                        population.append((rec["score"], child))
-                    if rec["finding"] and not cfg.continue_after_finding:
-                        return "done"
-                    continue
-                if not self._owned():
-                    return "superseded"
-                if should_stop() or not self._claim_ticket():
-                    self._checkpoint(cycle, current)
-                    return "stopped"
-                _append(self.journal, {"event": "start", "key": key, "hash": child.content_hash(),
-                                       "pid": os.getpid()})
-                out = runner.execute(child)
-                rec = {"event": "end", "key": key, "seed_index": self.si, "cycle": cycle, "member": member,
-                       "hash": child.content_hash(), "parent": current.content_hash(),
-                       "mutation": f"{gen.description} | {mut.description}",
-                       "retries": gen.retries + mut.retries, "finding": None, "score": None,
-                       "components": {}, "verdict": "pass", "pid": os.getpid()}
-                timings = {"mutation": t_mutate, "isolation": 0.0}
-                t_store = time.perf_counter()
-                if out.status == OK:
-                    ex = out.execution
-                    timings.update(ex.timings)
-                    timings["isolation"] = max(out.wall_time - ex.wall_time, 0.0)
-                    rec.update(termination=ex.termination.value, frames=ex.trace.n_frames,
-                               wall_time=round(ex.wall_time, 4))
-                    if ex.misbehaviors:
-                        m = ex.misbehaviors[0]
-                        t_store = time.perf_counter()
-                        rel = self._save_finding(child, list(ex.misbehaviors), key, ex.trace, ex.termination.value)
-                        rec.update(verdict=f"{m.oracle}/{m.kind}", finding=rel)
-                    else:
-                        from drivefuzz.search.quality import score_trace
+        store = FindingStore(self.out, mutator.rmap, runner.misbehaviors, TriageConfig(reproduce=cfg.reproduce),
+                             {"oracles": cfg.oracles.settings, "exec_timeout_s": cfg.exec_timeout_s})
 
-                        t0 = time.perf_counter()
-                        q = score_trace(ex.trace, cfg.quality)
-                        timings["quality"] = time.perf_counter() - t0
-                        rec.update(score=q.score, components=q.as_dict())
-                        population.append((q.score, child))
-                        t_store = time.perf_counter()
-                else:  # the simulator crashed or hung, or a plugin raised: a finding of its own kind
-                    m = Misbehavior(oracle=out.status, kind=out.error_type or out.status, frame=-1, time=0.0,
-                                    position=(0.0, 0.0), details={"detail": out.detail})
-                    rel = self._save_finding(child, [m], key, None, out.status,
-                                             {"error": {"status": out.status, "type": out.error_type,
-                                                        "detail": out.detail, "traceback": out.traceback}})
-                    rec.update(termination=out.status, frames=0, wall_time=round(out.wall_time, 4),
-                               verdict=f"{m.oracle}/{m.kind}", finding=rel)
-                timings["storage"] = time.perf_counter() - t_store
-                rec["timings"] = {k: round(v, 6) for k, v in timings.items()}
-                _append(self.journal, rec)
-                done[key] = rec
-                on_record(rec)
-                if rec["finding"] and not cfg.continue_after_finding:
+        def execute(key: str, scenario, parent, description: str, retries: int, t_mutate: float,
+                    lineage: int, cycle: int, member: int, baseline) -> dict[str, Any] | str:
+            """The record of one execution (from the journal if it ran before), or why it did not run."""
+            if key in done:  # finished before a stop or a kill: reuse its result
+                return done[key]
+            if not self._owned():
+                return "superseded"
+            if should_stop() or not self._claim_ticket():
+                return "stopped"
+            _append(self.journal, {"event": "start", "key": key, "hash": scenario.content_hash(), "pid": os.getpid()})
+            rec = {"event": "end", "key": key, "seed_index": self.si, "lineage": lineage, "cycle": cycle,
+                   "member": member, "hash": scenario.content_hash(), "parent": parent, "mutation": description,
+                   "retries": retries, "finding": None, "score": None, "risk": None, "hint": None,
+                   "components": {}, "verdict": "pass", "pid": os.getpid()}
+            self._execute_into(rec, runner, store, scenario, key, t_mutate, baseline)
+            _append(self.journal, rec)
+            done[key] = rec
+            on_record(rec)
+            return rec
+
+        # The seed's clean run: the baseline that risk is measured against (and a finding if the seed fails).
+        if "baseline" not in ckpt:
+            rec = execute(f"{self.si}/seed", seed_sc, None, "the seed as it is", 0, 0.0, -1, -1, 0, None)
+            if isinstance(rec, str):
+                return rec
+            ckpt["baseline"] = rec.get("risk_detail")
+            self._checkpoint(schedule, ckpt["baseline"])
+        baseline = _baseline(ckpt["baseline"])
+
+        while True:
+            if schedule.lineage is None:
+                if cfg.one_lineage_per_seed and schedule.lineages >= 1:
                     return "done"
-            if population:
-                if cfg.feedback:
-                    current = min(population, key=lambda p: p[0])[1]
-                else:
-                    current = random.Random(f"{cfg.seed}/{self.si}/{cycle}/select").choice(population)[1]
-            self._checkpoint(cycle + 1, current)
-        return "done"
+                schedule.start_lineage(random.Random(f"{cfg.seed}/{self.si}/lineage/{schedule.lineages}"))
+                self._checkpoint(schedule, ckpt["baseline"])
+            lin = schedule.lineage
+            parent = seed_sc if lin.current is None else load_scenario(self.out / lin.current).model_copy(
+                update={"ads": cfg.ads})
+            parent_hash = parent.content_hash()
+            members: list[tuple[dict[str, Any], Any]] = []
+            for member in range(cfg.population):
+                t0 = time.perf_counter()
+                rng = random.Random(f"{cfg.seed}/{self.si}/{lin.number}/{lin.cycle}/{parent_hash}/{member}")
+                mut = mutator.successor(parent, cfg.strategy, rng, hint=lin.hint)
+                rec = execute(f"{self.si}/{lin.number}/{lin.cycle}/{member}", mut.scenario, parent_hash,
+                              mut.description, mut.retries, time.perf_counter() - t0, lin.number, lin.cycle, member,
+                              baseline)
+                if isinstance(rec, str):
+                    return rec
+                members.append((rec, mut.scenario))
+            found = any(rec["finding"] for rec, _ in members)
+            # findings do not become parents: the lineage goes on from the riskiest mutant that passed
+            candidates = [(rec, sc) for rec, sc in members
+                          if not rec["finding"] and not rec.get("incident") and rec["risk"] is not None]
+            values = [_feedback_value(rec, cfg.feedback) for rec, _ in candidates]
+            pick = pick_successor(values, cfg.feedback,
+                                  random.Random(f"{cfg.seed}/{self.si}/{lin.number}/{lin.cycle}/{parent_hash}/select"))
+            ref = hint = value = None
+            if pick is not None:
+                rec, successor = candidates[pick]
+                ref, hint, value = self._corpus_ref(successor), rec.get("hint"), values[pick]
+            schedule.cycle_done(value, ref, hint, found, cfg.continue_after_finding)
+            self._checkpoint(schedule, ckpt["baseline"])
+            if schedule.lineage is None:
+                return "done" if cfg.one_lineage_per_seed else "yielded"
+
+    def _execute_into(self, rec: dict[str, Any], runner, store, scenario, key: str, t_mutate: float,
+                      baseline) -> None:
+        """Run ``scenario`` and fill ``rec`` with its outcome, feedback and timings (saving a finding)."""
+        from drivefuzz.search.quality import score_trace
+        from drivefuzz.search.risk import risk_score
+        from drivefuzz.sim.simhost import OK
+
+        out = runner.execute(scenario)
+        timings = {"mutation": t_mutate, "isolation": 0.0}
+        t_store = time.perf_counter()
+        if out.status == OK:
+            ex = out.execution
+            timings.update(ex.timings)
+            timings["isolation"] = max(out.wall_time - ex.wall_time, 0.0)
+            rec.update(termination=ex.termination.value, frames=ex.trace.n_frames, wall_time=round(ex.wall_time, 4))
+            t0 = time.perf_counter()
+            q = score_trace(ex.trace, self.cfg.quality)
+            r = risk_score(ex.trace, self.cfg.risk, baseline)
+            timings["quality"] = time.perf_counter() - t0
+            rec.update(score=q.score, components=q.as_dict(), risk=r.score, hint=r.riskiest_actor,
+                       risk_detail=r.as_dict())
+            t_store = time.perf_counter()
+            if ex.misbehaviors:
+                m = ex.misbehaviors[0]
+                t0 = time.perf_counter()
+                filed = store.triage(scenario, list(ex.misbehaviors), ex.trace, key, ex.termination.value)
+                timings["triage"] = time.perf_counter() - t0
+                rec.update(verdict=f"{m.oracle}/{m.kind}", signature=filed.signature, fault=filed.fault,
+                           triage_execs=filed.executions, **{"incident" if filed.fault == "other" else "finding": filed.rel})
+        else:  # the simulator crashed or hung, or a plugin raised: a finding of its own kind
+            m = Misbehavior(oracle=out.status, kind=out.error_type or out.status, frame=-1, time=0.0,
+                            position=(0.0, 0.0), details={"detail": out.detail})
+            filed = store.triage(scenario, [m], None, key, out.status,
+                                 {"error": {"status": out.status, "type": out.error_type,
+                                            "detail": out.detail, "traceback": out.traceback}})
+            rec.update(termination=out.status, frames=0, wall_time=round(out.wall_time, 4),
+                       verdict=f"{m.oracle}/{m.kind}", finding=filed.rel, signature=filed.signature, fault="ego")
+        timings["storage"] = time.perf_counter() - t_store
+        rec["timings"] = {k: round(v, 6) for k, v in timings.items()}
+
+
+def _feedback_value(rec: dict[str, Any], mode: str) -> float:
+    """Higher = riskier: the risk score, or the negated driving-quality score (the paper's, lower = worse)."""
+    if mode == "paper":
+        return -float(rec["score"])
+    return float(rec["risk"])
+
+
+def _baseline(detail: dict[str, Any] | None):
+    from drivefuzz.search.risk import RiskScore
+
+    return None if detail is None else RiskScore.from_dict(detail)
 
 
 _HOSTS: dict[int, Any] = {}  # one simulation host per thread of this process, kept between jobs
@@ -321,6 +340,13 @@ class _Runner:
     def __init__(self, cfg):
         self.cfg = cfg
         self.host = _host_for_this_thread(cfg.exec_timeout_s) if cfg.isolate else None
+
+    def misbehaviors(self, scenario):
+        """(misbehaviors, trace) of a triage rerun, or None when it did not run to the end."""
+        from drivefuzz.sim.simhost import OK
+
+        out = self.execute(scenario)
+        return (tuple(out.execution.misbehaviors), out.execution.trace) if out.status == OK else None
 
     def execute(self, scenario):
         if self.host is not None:

@@ -102,29 +102,45 @@ def random_missions(rmap: RoadMap, rng: random.Random, network: str, max_draws: 
 
 def generate_seeds(network: str | Path, n: int, rng_seed: int = 0, *,
                    verify: Callable[[Scenario], tuple[bool, str]] | None = None, max_tries: int | None = None,
-                   log: Callable[[str], None] = lambda s: None) -> list[Scenario]:
+                   conflict_share: float = 0.5, log: Callable[[str], None] = lambda s: None) -> list[Scenario]:
     """``n`` seeds for ``network`` (fewer if the network does not allow them).
 
+    About ``conflict_share`` of them are missions through a conflict point of the network (an unprotected
+    left turn, a link that must yield, a merge, a crosswalk, a signalised stop line:
+    :mod:`drivefuzz.scenario.conflicts`), taking the kinds in turn; the rest are random missions.
     ``verify`` (for example :func:`drivefuzz.sim.verify.dry_run`) returns (passed, reason) for a candidate;
     candidates that fail it are dropped. Without it, every candidate mission is kept.
     """
+    from itertools import islice
+
+    from drivefuzz.scenario.conflicts import conflict_missions
     from drivefuzz.scenario.roadmap import load_roadmap
 
     rmap = load_roadmap(network)
     rng = random.Random(rng_seed)
+    path = str(Path(network).resolve())
+    randoms = ((None, sc) for sc in random_missions(rmap, rng, path))
+    conflicts = conflict_missions(rmap, random.Random(f"{rng_seed}/conflicts"), path) if conflict_share > 0 else iter(())
     out: list[Scenario] = []
     tries = 0
     max_tries = max_tries or 20 * n
-    for cand in random_missions(rmap, rng, str(Path(network).resolve())):
-        if len(out) >= n or tries >= max_tries:
-            break
+    while len(out) < n and tries < max_tries:
+        want_conflict = len([s for s in out if "-conflict-" in s.name]) < round(conflict_share * n)
+        cand = next(islice(conflicts, 1), None) if want_conflict else None
+        if cand is None:
+            cand = next(randoms, None)
+            if cand is None:
+                break
+        kind, sc = cand
         tries += 1
         if verify is not None:
-            ok, why = verify(cand)
-            log(f"candidate {cand.mission.start_lane}->{cand.mission.goal_edge}: {'ok' if ok else 'rejected: ' + why}")
+            ok, why = verify(sc)
+            log(f"candidate {sc.mission.start_lane}->{sc.mission.goal_edge}"
+                f"{'' if kind is None else ' (' + kind.value + ')'}: {'ok' if ok else 'rejected: ' + why}")
             if not ok:
                 continue
-        out.append(cand.model_copy(update={"name": f"{rmap.name}-seed-{len(out):03d}"}))
+        what = "seed" if kind is None else f"conflict-{kind.value}"
+        out.append(sc.model_copy(update={"name": f"{rmap.name}-{what}-{len(out):03d}"}))
     return out
 
 

@@ -42,6 +42,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from shapely.geometry import LineString, Point
 
 from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN, RoadMap
+from drivefuzz.search.fairness import lane_limit, unfair
 from drivefuzz.scenario import (
     Actor,
     ActorKind,
@@ -54,6 +55,9 @@ from drivefuzz.scenario import (
 )
 
 MPH = 0.44704  # [m/s]
+#: The weather aspects that change something (sensing, friction, wind, glare). ``cloud`` and
+#: ``puddle_density`` stay in the model for the files' sake but are read nowhere, so they are not mutated.
+EFFECTIVE_WEATHER = ("rain", "wind", "fog", "wetness", "sun_azimuth_deg", "sun_altitude_deg")
 STRATEGIES = ("all", "congestion", "entropy", "instability", "maneuver")
 Strategy = Literal["all", "congestion", "entropy", "instability", "maneuver"]
 
@@ -64,7 +68,15 @@ class MutationConfig(BaseModel):
     max_range: float = Field(default=80.0, gt=0.0, description="[m]")
     behind_range: float = Field(default=40.0, ge=0.0, description="[m] behind the ego (linear rear-enders)")
     min_separation: float = Field(default=7.0, ge=0.0, description="[m] between any two bodies' centres")
-    max_vehicle_speed: float = Field(default=20 * MPH, gt=0.0, description="[m/s]")
+    max_vehicle_speed: float = Field(default=40.0, gt=0.0, description="[m/s] a cap over the lane-relative speeds")
+    vehicle_speed_share: tuple[float, float] = Field(default=(0.4, 1.0), description="NPC vehicle speeds as a share "
+                                                     "of their lane's limit (low, high)")
+    immobile_min_range: float = Field(default=25.0, ge=0.0, description="[m] along the route: no obstacle closer "
+                                      "to the ego's start")
+    target_share: float = Field(default=0.5, ge=0.0, le=1.0, description="members that move the riskiest actor "
+                                "instead of adding a component")
+    catalogue_share: float = Field(default=0.5, ge=0.0, le=1.0, description="new components drawn from the "
+                                   "situation catalogue (the rest by random placement)")
     max_pedestrian_speed: float = Field(default=6 * MPH, gt=0.0, description="[m/s]")
     max_actors: int = Field(default=12, ge=0)
     max_puddles: int = Field(default=4, ge=0)
@@ -73,7 +85,8 @@ class MutationConfig(BaseModel):
     #: Linear vehicles (entropy): share placed behind the ego to rear-end it, and share sent across a junction
     #: on the ego's route timed to meet it there (side impact); the rest go ahead of the ego on its route.
     entropy_linear_share: float = Field(default=0.75, ge=0.0, le=1.0, description="entropy: linear (else immobile)")
-    linear_rear_share: float = Field(default=0.35, ge=0.0, le=1.0)
+    linear_rear_share: float = Field(default=0.0, ge=0.0, le=1.0, description="reckless rear-enders: unfair, "
+                                     "so off by default (the fairness check rejects them anyway)")
     linear_cross_share: float = Field(default=0.45, ge=0.0, le=1.0)
     conflict_range: float = Field(default=160.0, gt=0.0, description="[m] along the route: junctions where linear "
                                   "vehicles are timed to cross the ego's path")
@@ -180,6 +193,11 @@ class Mutator:
                                             for l in self.rmap.edge(e).getLanes())
         return self._walkable_cache[key]
 
+    def _vehicle_speed(self, lane_id: str, rng: random.Random) -> float:
+        """[m/s] a vehicle's speed drawn relative to its lane's limit (``vehicle_speed_share``)."""
+        lo, hi = self.cfg.vehicle_speed_share
+        return round(min(lane_limit(self, lane_id) * rng.uniform(lo, hi), self.cfg.max_vehicle_speed), 2)
+
     def _kind(self, sc: Scenario, rng: random.Random) -> ActorKind:
         kind = rng.choice(list(ActorKind))
         return kind if kind is ActorKind.VEHICLE or self._walkable(sc) else ActorKind.VEHICLE
@@ -221,7 +239,7 @@ class Mutator:
                 mode = ("rear" if u < cfg.linear_rear_share else
                         "cross" if u < cfg.linear_rear_share + cfg.linear_cross_share else "ahead")
                 if mode != "ahead":
-                    speed = round(rng.uniform(0.5 * vmax, vmax), 2)
+                    speed = self._vehicle_speed(sc.mission.start_lane, rng)
                     placed = self._rear_place(sc, rng, speed) if mode == "rear" else self._cross_place(sc, rng, speed)
                     if placed is None:
                         continue
@@ -234,12 +252,16 @@ class Mutator:
                                       dest_edge=dest)
                     except ValueError:
                         continue
+                    if unfair(self, sc, actor):
+                        continue
                     return Mutation(sc.model_copy(update={"actors": sc.actors + (actor,)}),
                                     f"add linear vehicle {aid} on {lane} @ {pos:.1f} m, {speed:.1f} m/s{extra}",
                                     attempt)
             spot = self._spot_along(sc, rng, rng.uniform(cfg.min_range, cfg.max_range), vclass)
             if spot is None or not self._separated(sc, spot.x, spot.y):
                 continue
+            if kind is ActorKind.VEHICLE and nav is not NavType.IMMOBILE:
+                speed = self._vehicle_speed(spot.lane, rng)
             fields = dict(id=aid, kind=kind, nav=nav, start_lane=spot.lane, start_pos=spot.pos, speed=speed)
             if kind is ActorKind.PEDESTRIAN:
                 if nav is NavType.LINEAR:  # jaywalk: straight across the road, perpendicular to it
@@ -269,6 +291,8 @@ class Mutator:
             try:
                 actor = Actor(**fields)
             except ValueError:
+                continue
+            if unfair(self, sc, actor):
                 continue
             new = sc.model_copy(update={"actors": sc.actors + (actor,)})
             return Mutation(new, f"add {nav.value} {kind.value} {aid} on {spot.lane} @ {spot.pos:.1f} m, "
@@ -413,11 +437,12 @@ class Mutator:
         pts.append(self.rmap.geom(to_lane).position(min(15.0, g.length))[:2])
         return LineString(pts)
 
-    def _conflicts(self, sc: Scenario) -> list[tuple[int, float, str, str, float, str]]:
+    def _conflicts(self, sc: Scenario) -> list[tuple[int, float, str, str, float, str, str, str]]:
         """Ways to cross the ego's path at the junctions of its route within ``conflict_range``:
         (route index of the junction's incoming edge, ego distance [m] from its start to the conflict point,
         actor lane entering the junction, actor destination edge, actor distance [m] from that lane's end to
-        the conflict point, junction id). Cached per mission."""
+        the conflict point, junction id, the ego's and the actor's link states: 'M' major, 'm' minor, 's'
+        stop, 'w' all-way stop, 'o' signalised...). Cached per mission."""
         m = sc.mission
         key = (m.start_lane, m.start_pos, m.goal_edge)
         if key in self._conflict_cache:
@@ -434,6 +459,7 @@ class Mutator:
             if not conns:
                 continue
             fl, tl, via = min(conns, key=lambda c: abs(rmap.lane(c[0]).getIndex() - ego_index))
+            ego_state = next((c.getState() for c in rmap.lane(fl).getOutgoing() if c.getToLane().getID() == tl), "")
             ego_line = self._passage(fl, tl, via)
             ego_zone = ego_line.buffer(2.0)  # closer centre lines than this: the bodies meet
             node = rmap.edge(e).getToNode()
@@ -454,17 +480,18 @@ class Mutator:
                         d_actor = min(line.project(Point(xy)) for xy in _coords(hit))
                         pt = line.interpolate(d_actor)
                         out.append((i, s + ego_line.project(pt), lane.getID(), to.getEdge().getID(), d_actor,
-                                    node.getID()))
+                                    node.getID(), ego_state, c.getState()))
         self._conflict_cache[key] = out
         return out
 
     def _cross_place(self, sc: Scenario, rng: random.Random, speed: float):
         """On another approach to a junction of the ego's route, timed to reach the point where its path
         crosses (or merges into) the ego's just as the ego gets there: a side impact if nobody yields."""
-        options = self._conflicts(sc)
+        # a reckless driver crosses only where it has the right of way anyway: the ego must yield to it there
+        options = [o for o in self._conflicts(sc) if o[6] in ("m", "s", "w") and o[7] == "M"]
         if not options:
             return None
-        i, s_c, lane_id, dest, d_c, node = rng.choice(options)
+        i, s_c, lane_id, dest, d_c, node, _, _ = rng.choice(options)
         # the ego's front reaches the conflict point at about t_c (the profile runs a little early, and a
         # reference ADS that sees the actor in its path first simply stops): arrive while the ego's body is there
         t_c = self._ego_eta(sc, s_c)
@@ -476,7 +503,8 @@ class Mutator:
         if placed is None:  # not enough road upstream: start as far back as possible, slower
             placed = (lane_id, 1.0, lane_len - 1.0)
         speed = round((placed[2] + d_c) / max(t_meet, 0.1), 2)  # the junctions on the way make it longer
-        if not 0.3 * self.cfg.max_vehicle_speed <= speed <= self.cfg.max_vehicle_speed:
+        limit = min(lane_limit(self, lane_id) * self.cfg.vehicle_speed_share[1], self.cfg.max_vehicle_speed)
+        if not 0.3 * limit <= speed <= limit:
             return None
         lane, pos, _ = placed
         actor_route = rmap.route(rmap.lane(lane).getEdge().getID(), dest)
@@ -499,6 +527,70 @@ class Mutator:
             return Mutation(new, f"add puddle mu={p.friction} {p.length}x{p.width} m at ({p.x:.1f}, {p.y:.1f}) "
                                  f"near {spot.lane}", attempt)
         return Mutation(sc, f"no feasible puddle after {cfg.max_retries} retries", cfg.max_retries)
+
+    # -------------------------------------------------------------- successor
+    def successor(self, sc: Scenario, strategy: str, rng: random.Random, hint: str | None = None) -> Mutation:
+        """One member of a population (the job calls this once per member, each with its own ``rng``).
+
+        With ``target_share``, a targeted move of the actor that carried the most risk in ``sc``'s run
+        (``hint``; a random actor without one); otherwise a new component of its own, from the situation
+        catalogue (``catalogue_share``) or placed by the strategy, and then the weather.
+        """
+        if sc.actors and rng.random() < self.cfg.target_share:
+            ids = [a.id for a in sc.actors]
+            i = ids.index(hint) if hint in ids else rng.randrange(len(ids))
+            m = self.target(sc, i, rng)
+            if m.scenario is not sc:
+                return m
+        from drivefuzz.search.catalogue import SITUATIONS, add_situation
+
+        if strategy in ("all", "mix") and rng.random() < self.cfg.catalogue_share and len(sc.actors) < self.cfg.max_actors:
+            gen = add_situation(self, sc, rng.choice(SITUATIONS), rng)
+        else:
+            gen = self.generate(sc, strategy, rng)
+        w, wdesc = self._mutate_weather(gen.scenario.weather, rng)
+        return Mutation(gen.scenario.model_copy(update={"weather": w}), f"{gen.description}; {wdesc}", gen.retries)
+
+    def target(self, sc: Scenario, i: int, rng: random.Random) -> Mutation:
+        """Move actor ``i`` where it matters: its arrival time (departure), its start along its lane, its
+        lane, or its speed relative to the lane's limit. Every move is checked for fairness and separation."""
+        a = sc.actors[i]
+        aspects = ["start", "lane"] if a.nav is NavType.IMMOBILE else ["timing", "start", "speed"]
+        if a.kind is ActorKind.VEHICLE and a.nav is not NavType.IMMOBILE:
+            aspects.append("lane")
+        geom = self.rmap.geom(a.start_lane)
+        for attempt in range(self.cfg.max_retries):
+            aspect = rng.choice(aspects)
+            if aspect == "timing":
+                upd = {"depart": round(max(a.depart + rng.uniform(-3.0, 3.0), 0.0), 1)}
+                desc = f"target {a.id}: depart {a.depart:.1f} -> {upd['depart']:.1f} s"
+            elif aspect == "start":
+                pos = round(min(max(a.start_pos + rng.choice((-1, 1)) * rng.uniform(2.0, 25.0), 1.0),
+                                geom.length - 0.5), 2)
+                if pos == a.start_pos:
+                    continue
+                upd, desc = {"start_pos": pos}, f"target {a.id}: start {a.start_pos:.1f} -> {pos:.1f} m"
+            elif aspect == "speed":
+                speed = (self._vehicle_speed(a.start_lane, rng) if a.kind is ActorKind.VEHICLE
+                         else round(rng.uniform(0.3, 1.0) * self.cfg.max_pedestrian_speed, 2))
+                upd, desc = {"speed": speed}, f"target {a.id}: speed {a.speed:.1f} -> {speed:.1f} m/s"
+            else:
+                vclass = PEDESTRIAN if a.kind is ActorKind.PEDESTRIAN else PASSENGER
+                lanes = [l for l in self.rmap.lane(a.start_lane).getEdge().getLanes()
+                         if l.allows(vclass) and l.getID() != a.start_lane]
+                if not lanes:
+                    continue
+                lane = rng.choice(lanes)
+                pos = round(min(a.start_pos, lane.getLength() - 0.5), 2)
+                upd, desc = {"start_lane": lane.getID(), "start_pos": pos}, f"target {a.id}: lane -> {lane.getID()}"
+            if "start_pos" in upd:
+                x, y, _ = self.rmap.geom(upd.get("start_lane", a.start_lane)).position(upd["start_pos"])
+                if not self._separated(sc, x, y, skip=a.id):
+                    continue
+            m = self._replace_actor(sc, i, upd, desc, attempt)
+            if m.scenario is not sc:
+                return m
+        return Mutation(sc, f"no fair targeted move of {a.id}", self.cfg.max_retries)
 
     # ----------------------------------------------------------------- mutate
     def mutate(self, sc: Scenario, rng: random.Random) -> Mutation:
@@ -538,6 +630,8 @@ class Mutator:
             else:
                 return Mutation(sc, f"no feasible position for {a.id}", cfg.max_retries)
         elif aspect == "speed":
+            if a.kind is ActorKind.VEHICLE:
+                vmax = min(vmax, 1.2 * lane_limit(self, a.start_lane))
             speed = round(min(max(a.speed * rng.uniform(0.6, 1.4), 0.2), vmax), 2)
             update = {"speed": speed}
             desc = f"{a.id} speed {a.speed:.1f} -> {speed:.1f} m/s"
@@ -549,8 +643,19 @@ class Mutator:
             mans[k] = m.model_copy(update={"time": t})
             update = {"maneuvers": tuple(sorted(mans, key=lambda mm: mm.time))}
             desc = f"{a.id} maneuver {k} ({m.action.value}) at {m.time:.2f} -> {t:.2f} s"
+        return self._replace_actor(sc, i, update, desc, retries)
+
+    def _replace_actor(self, sc: Scenario, i: int, update: dict, desc: str, retries: int = 0) -> Mutation:
+        """``sc`` with actor ``i`` changed by ``update``; unchanged (and said so) when that would be unfair."""
         actors = list(sc.actors)
-        actors[i] = Actor.model_validate({**a.model_dump(), **update})
+        try:
+            actors[i] = Actor.model_validate({**sc.actors[i].model_dump(), **update})
+        except ValueError as exc:
+            return Mutation(sc, f"{desc}: invalid ({str(exc).splitlines()[0]}), not applied", retries)
+        others = sc.model_copy(update={"actors": tuple(a for k, a in enumerate(sc.actors) if k != i)})
+        why = unfair(self, others, actors[i])
+        if why:
+            return Mutation(sc, f"{desc}: unfair ({why}), not applied", retries)
         return Mutation(sc.model_copy(update={"actors": tuple(actors)}), desc, retries)
 
     def _mutate_puddle(self, sc: Scenario, i: int, rng: random.Random) -> Mutation:
@@ -572,7 +677,7 @@ class Mutator:
         return Mutation(sc.model_copy(update={"puddles": tuple(puddles)}), desc)
 
     def _mutate_weather(self, w: Weather, rng: random.Random) -> tuple[Weather, str]:
-        fields = list(Weather.model_fields)
+        fields = list(EFFECTIVE_WEATHER)
         name = rng.choice(fields)
         if name == "sun_azimuth_deg":
             value = round(rng.uniform(0.0, 360.0), 1)

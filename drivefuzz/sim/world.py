@@ -122,6 +122,11 @@ class ActorDriver:
                 if pid not in alive:
                     del self.walkers[pid]
                     continue
+                if w[4] <= 0.0 and self.spec[pid].nav is NavType.LINEAR:
+                    # at its target: a jaywalker leaves the road (standing on it for ever blocked the traffic)
+                    sim.person.remove(pid)
+                    del self.walkers[pid]
+                    continue
                 step = min(self.spec[pid].speed * self.dt, w[4])
                 w[0] += w[2] * step
                 w[1] += w[3] * step

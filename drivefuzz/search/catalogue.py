@@ -1,0 +1,284 @@
+"""Situations from a catalogue: new components that recreate pre-crash scenarios, not only random placements.
+
+The field's catalogue is the NHTSA pre-crash scenario typology (Najm, Smith and Yanagisawa, 2007: 37
+scenarios that cover most light-vehicle crashes). Each :class:`Situation` here builds one of them around
+the ego's mission, timed with the mutator's profile of how the ego drives the route, and every actor it
+adds passes the fairness rules (:mod:`drivefuzz.search.fairness`). ``docs/catalogue.md`` lists which of
+the 37 are covered and why the others are not.
+
+A situation returns the scenario unchanged (with a description saying why) when the mission does not
+offer what it needs (a second lane, a junction ahead, a sidewalk).
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass
+from typing import Callable
+
+from drivefuzz.scenario import Actor, ActorKind, Maneuver, ManeuverAction, NavType, Puddle, Scenario
+from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN
+from drivefuzz.search.fairness import lane_limit, unfair
+from drivefuzz.search.mutate import Mutation, Mutator
+
+
+@dataclass(frozen=True)
+class Situation:
+    name: str
+    nhtsa: str  # the pre-crash scenario it recreates (Najm et al. 2007)
+    build: Callable[[Mutator, Scenario, random.Random], tuple[list[Actor], list[Puddle], dict, str] | None]
+
+
+def add_situation(mut: Mutator, sc: Scenario, situation: Situation, rng: random.Random) -> Mutation:
+    """``sc`` with ``situation`` added (retried up to ``max_retries``), or unchanged with the reason."""
+    for attempt in range(mut.cfg.max_retries):
+        built = situation.build(mut, sc, rng)
+        if built is None:
+            continue
+        actors, puddles, weather, desc = built
+        new = sc
+        ok = True
+        for actor in actors:
+            if len(new.actors) >= mut.cfg.max_actors or unfair(mut, new, actor):
+                ok = False
+                break
+            x, y, _ = mut.rmap.geom(actor.start_lane).position(actor.start_pos)
+            if not mut._separated(new, x, y):
+                ok = False
+                break
+            new = new.model_copy(update={"actors": new.actors + (actor,)})
+        if not ok or len(new.puddles) + len(puddles) > mut.cfg.max_puddles:
+            continue
+        update: dict = {"actors": new.actors, "puddles": sc.puddles + tuple(puddles)}
+        if weather:
+            update["weather"] = sc.weather.model_copy(update=weather)
+        return Mutation(sc.model_copy(update=update), f"situation {situation.name}: {desc}", attempt)
+    return Mutation(sc, f"situation {situation.name}: not possible on this mission", mut.cfg.max_retries)
+
+
+# ------------------------------------------------------------------ where the ego will be
+def _route_spot(mut: Mutator, sc: Scenario, dist: float) -> tuple[int, str, float] | None:
+    """(route index, the lane the ego will drive, position [m]) ``dist`` metres along its route."""
+    route = mut._route(sc)
+    pos = sc.mission.start_pos + dist
+    for i, e in enumerate(route):
+        length = mut.rmap.edge(e).getLength()
+        if pos <= length:
+            return i, _ego_lane(mut, sc, i), round(min(max(pos, 1.0), length - 0.5), 2)
+        pos -= length
+    return None
+
+
+def _ego_lane(mut: Mutator, sc: Scenario, i: int) -> str:
+    """The lane of route edge ``i`` the ego drives: its start lane, or one that leads on along the route."""
+    route = mut._route(sc)
+    if i == 0:
+        return sc.mission.start_lane
+    if i + 1 < len(route):
+        conns = mut.rmap.connections(route[i], route[i + 1])
+        if conns:
+            return conns[0][0]
+    return mut.rmap.drive_lane(route[i])
+
+
+def _new_id(sc: Scenario, prefix: str, taken: list[Actor]) -> str:
+    used = {a.id for a in sc.actors} | {a.id for a in taken}
+    k = len(sc.actors) + len(taken)
+    while f"{prefix}{k}" in used:
+        k += 1
+    return f"{prefix}{k}"
+
+
+def _dest(mut: Mutator, sc: Scenario) -> str:
+    return mut._route(sc)[-1]
+
+
+def _ahead(mut: Mutator, sc: Scenario, rng: random.Random, lo: float, hi: float):
+    cfg = mut.cfg
+    return _route_spot(mut, sc, rng.uniform(max(lo, cfg.immobile_min_range), max(hi, cfg.immobile_min_range + 1)))
+
+
+# ------------------------------------------------------------------ the situations
+def lead_stopped(mut, sc, rng):
+    spot = _ahead(mut, sc, rng, 30.0, 120.0)
+    if spot is None:
+        return None
+    _, lane, pos = spot
+    a = Actor(id=_new_id(sc, "v", []), kind=ActorKind.VEHICLE, nav=NavType.IMMOBILE, start_lane=lane, start_pos=pos,
+              speed=0.0)
+    return [a], [], {}, f"stopped vehicle {a.id} on the ego's lane {lane} @ {pos:.1f} m"
+
+
+def stopped_in_fog(mut, sc, rng):
+    built = lead_stopped(mut, sc, rng)
+    if built is None:
+        return None
+    fog = round(rng.uniform(60.0, 100.0), 1)
+    return built[0], [], {"fog": fog}, built[3] + f", fog {fog}"
+
+
+def lead_slower(mut, sc, rng):
+    spot = _ahead(mut, sc, rng, 15.0, 80.0)
+    if spot is None:
+        return None
+    _, lane, pos = spot
+    speed = round(lane_limit(mut, lane) * rng.uniform(0.15, 0.5), 2)
+    a = Actor(id=_new_id(sc, "v", []), kind=ActorKind.VEHICLE, nav=NavType.AUTOPILOT, start_lane=lane,
+              start_pos=pos, speed=speed, dest_edge=_dest(mut, sc))
+    return [a], [], {}, f"slow vehicle {a.id} at {speed:.1f} m/s on {lane} @ {pos:.1f} m"
+
+
+def lead_brakes(mut, sc, rng):
+    spot = _ahead(mut, sc, rng, 12.0, 50.0)
+    if spot is None:
+        return None
+    _, lane, pos = spot
+    speed = round(lane_limit(mut, lane) * rng.uniform(0.6, 1.0), 2)
+    t_brake = round(rng.uniform(2.0, 12.0), 2)
+    t_go = round(t_brake + rng.uniform(2.0, 6.0), 2)
+    a = Actor(id=_new_id(sc, "v", []), kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=lane, start_pos=pos,
+              speed=speed, dest_edge=_dest(mut, sc),
+              maneuvers=(Maneuver(time=t_brake, action=ManeuverAction.SPEED, value=0.0),
+                         Maneuver(time=t_go, action=ManeuverAction.SPEED, value=speed)))
+    return [a], [], {}, f"leader {a.id} at {speed:.1f} m/s brakes to a stop at {t_brake} s, drives on at {t_go} s"
+
+
+def cut_in(mut, sc, rng):
+    """A vehicle on the next lane, from the ego's rear quarter or just ahead, changes into the ego's lane."""
+    spot = _route_spot(mut, sc, rng.uniform(-25.0, 40.0))
+    if spot is None:
+        return None
+    i, lane, pos = spot
+    lanes = [l for l in mut.rmap.lane(lane).getEdge().getLanes() if l.allows(PASSENGER)]
+    idx = mut.rmap.lane(lane).getIndex()
+    beside = [l for l in lanes if abs(l.getIndex() - idx) == 1]
+    if not beside:
+        return None
+    other = rng.choice(beside)
+    toward = ManeuverAction.LANE_RIGHT if other.getIndex() > idx else ManeuverAction.LANE_LEFT
+    speed = round(lane_limit(mut, lane) * rng.uniform(0.8, 1.2), 2)
+    t_change = round(rng.uniform(1.0, 8.0), 2)
+    a = Actor(id=_new_id(sc, "v", []), kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=other.getID(),
+              start_pos=round(min(pos, other.getLength() - 0.5), 2), speed=speed, dest_edge=_dest(mut, sc),
+              maneuvers=(Maneuver(time=t_change, action=toward, value=round(rng.uniform(1.5, 3.5), 2)),))
+    return [a], [], {}, f"{a.id} on {other.getID()} at {speed:.1f} m/s cuts into the ego's lane at {t_change} s"
+
+
+def hidden_stopped(mut, sc, rng):
+    """A leader changes lanes and reveals a stopped vehicle ahead of it."""
+    spot = _ahead(mut, sc, rng, 15.0, 40.0)
+    if spot is None:
+        return None
+    i, lane, pos = spot
+    idx = mut.rmap.lane(lane).getIndex()
+    lanes = [l for l in mut.rmap.lane(lane).getEdge().getLanes() if l.allows(PASSENGER)]
+    beside = [l for l in lanes if abs(l.getIndex() - idx) == 1]
+    far = _route_spot(mut, sc, (pos - sc.mission.start_pos if i == 0 else 0.0) + rng.uniform(40.0, 90.0))
+    if not beside or far is None or far[0] != i:
+        return None
+    toward = ManeuverAction.LANE_RIGHT if beside[0].getIndex() > idx else ManeuverAction.LANE_LEFT
+    speed = round(lane_limit(mut, lane) * rng.uniform(0.5, 0.8), 2)
+    lead = Actor(id=_new_id(sc, "v", []), kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=lane,
+                 start_pos=pos, speed=speed, dest_edge=_dest(mut, sc),
+                 maneuvers=(Maneuver(time=round(rng.uniform(2.0, 6.0), 2), action=toward, value=2.0),))
+    stopped = Actor(id=_new_id(sc, "v", [lead]), kind=ActorKind.VEHICLE, nav=NavType.IMMOBILE, start_lane=lane,
+                    start_pos=far[2], speed=0.0)
+    return [lead, stopped], [], {}, f"{lead.id} swerves away from stopped {stopped.id} @ {far[2]:.1f} m on {lane}"
+
+
+def pulls_out(mut, sc, rng):
+    """A parked car pulls out ahead of the ego, timed so that a careful ego can still stop."""
+    spot = _ahead(mut, sc, rng, 40.0, 120.0)
+    if spot is None:
+        return None
+    _, lane, pos = spot
+    d = pos - sc.mission.start_pos if spot[0] == 0 else mut.rmap.route_length(mut._route(sc)[:spot[0] + 1],
+                                                                               sc.mission.start_pos, pos)
+    t_there = mut._ego_eta(sc, d)
+    depart = round(max(t_there - rng.uniform(1.5, 5.0), 0.5), 1)
+    a = Actor(id=_new_id(sc, "v", []), kind=ActorKind.VEHICLE, nav=NavType.AUTOPILOT, start_lane=lane, start_pos=pos,
+              speed=round(lane_limit(mut, lane) * rng.uniform(0.3, 0.7), 2), depart=depart, dest_edge=_dest(mut, sc))
+    return [a], [], {}, f"{a.id} pulls out on {lane} @ {pos:.1f} m at {depart} s"
+
+
+def walker_crosses(mut, sc, rng):
+    """A pedestrian steps off the sidewalk in front of the ego, timed to meet it (a careful ego can stop)."""
+    if not mut._walkable(sc):
+        return None
+    d = rng.uniform(20.0, 100.0)
+    spot = mut._spot_along(sc, rng, d, PEDESTRIAN)
+    if spot is None:
+        return None
+    speed = round(rng.uniform(0.8, 1.0) * mut.cfg.max_pedestrian_speed, 2)
+    side = mut._road_side(spot.lane)
+    across = mut._road_width(spot.lane) + rng.uniform(1.0, 3.0)
+    to_road = mut.rmap.lane(spot.lane).getWidth() / 2 + 0.5
+    t_meet = mut._ego_eta(sc, d)
+    depart = round(max(t_meet - to_road / speed - rng.uniform(0.0, 4.0), 0.0), 1)
+    a = Actor(id=_new_id(sc, "p", []), kind=ActorKind.PEDESTRIAN, nav=NavType.LINEAR, start_lane=spot.lane,
+              start_pos=spot.pos, speed=speed, depart=depart,
+              dest_xy=(round(spot.x - side * math.sin(spot.heading) * across, 2),
+                       round(spot.y + side * math.cos(spot.heading) * across, 2)))
+    return [a], [], {}, f"{a.id} crosses at {spot.lane} @ {spot.pos:.1f} m, leaving at {depart} s"
+
+
+def crossing_traffic(mut, sc, rng):
+    """A lawful vehicle on another approach to a junction of the ego's route, timed to reach the conflict
+    point with the ego: whoever must yield has to (straight crossing paths, left turn across path)."""
+    options = mut._conflicts(sc)
+    if not options:
+        return None
+    i, s_c, lane_id, dest, d_c, node, _, _ = rng.choice(options)
+    t_meet = mut._ego_eta(sc, s_c) + rng.uniform(-1.0, 1.5)
+    speed = round(lane_limit(mut, lane_id) * rng.uniform(0.6, 1.0), 2)
+    lane_len = mut.rmap.lane(lane_id).getLength()
+    back = speed * max(t_meet, 0.5) - d_c
+    placed = mut._upstream(lane_id, lane_len, back, rng) if back > 0 else None
+    if placed is None:
+        return None
+    lane, pos, _ = placed
+    route = mut.rmap.route(mut.rmap.lane(lane).getEdge().getID(), dest)
+    if not route:
+        return None
+    a = Actor(id=_new_id(sc, "v", []), kind=ActorKind.VEHICLE, nav=NavType.AUTOPILOT, start_lane=lane, start_pos=pos,
+              speed=speed, dest_edge=dest)
+    return [a], [], {}, f"{a.id} meets the ego at junction {node} at ~{t_meet:.1f} s ({speed:.1f} m/s)"
+
+
+def slippery_braking_zone(mut, sc, rng):
+    """A low-friction patch where the ego must brake or turn: before a stop line or in a junction turn."""
+    route = mut._route(sc)
+    if len(route) < 2:
+        return None
+    i = rng.randrange(len(route) - 1)
+    lane = _ego_lane(mut, sc, i)
+    geom = mut.rmap.geom(lane)
+    if rng.random() < 0.5:  # in the turn: the junction passage after edge i
+        conns = mut.rmap.connections(route[i], route[i + 1])
+        via = conns[0][2] if conns else ""
+        if not via:
+            return None
+        g = mut.rmap.geom(via)
+        x, y, h = g.position(g.length / 2)
+        where = f"in the junction after {route[i]}"
+    else:  # the last metres before the stop line
+        x, y, h = geom.position(max(geom.length - rng.uniform(3.0, 20.0), 0.5))
+        where = f"before the stop line of {lane}"
+    p = Puddle(x=round(x, 2), y=round(y, 2), length=round(rng.uniform(8.0, 20.0), 2), width=round(rng.uniform(3.0, 6.0), 2),
+               rotation=round(h, 3), friction=round(rng.uniform(0.05, 0.35), 2))
+    return [], [p], {}, f"puddle mu={p.friction} {where}"
+
+
+SITUATIONS: tuple[Situation, ...] = (
+    Situation("lead_stopped", "Lead vehicle stopped", lead_stopped),
+    Situation("stopped_in_fog", "Lead vehicle stopped (in fog, beyond the sensors' reach)", stopped_in_fog),
+    Situation("lead_slower", "Lead vehicle moving at lower constant speed", lead_slower),
+    Situation("lead_brakes", "Lead vehicle decelerating", lead_brakes),
+    Situation("cut_in", "Vehicle(s) changing lanes - same direction", cut_in),
+    Situation("hidden_stopped", "Lead vehicle stopped, revealed by a leader changing lanes", hidden_stopped),
+    Situation("pulls_out", "Vehicle(s) parking - same direction (pulling out)", pulls_out),
+    Situation("walker_crosses", "Pedestrian crash without prior vehicle maneuver", walker_crosses),
+    Situation("crossing_traffic", "Straight crossing paths / LTAP at non-signalized junctions", crossing_traffic),
+    Situation("slippery_braking_zone", "Control loss without prior vehicle action", slippery_braking_zone),
+)

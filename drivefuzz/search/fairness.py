@@ -1,0 +1,127 @@
+"""Fair adversaries: the timing rules that every placed or moved actor must meet.
+
+A finding must be a bug a careful driver would have avoided, so the mutator never builds a situation that
+no driver could get out of. After every placement, position, timing or speed change, :func:`unfair` checks:
+
+- **followers can stop**: a vehicle behind the ego on its lane (or on a lane feeding it) must be able to stop
+  for a stopped ego from its speed at ``NPC_DECEL``, with ``MARGIN`` to spare; a *linear* vehicle (which
+  ignores everyone) is never placed behind the ego at all;
+- **no pop-ups**: an actor that departs later must not appear inside the ego's stopping distance ahead of
+  where the ego is expected to be by then (or inside a follower's stopping distance behind it);
+- **walkers step out in time**: a jaywalker must reach the ego's path either after the ego has passed or
+  while the ego can still stop before it (careful braking ``EGO_DECEL`` after ``REACTION``);
+- **obstacles are not at the start**: an immobile actor stands at least ``MutationConfig.immobile_min_range``
+  metres ahead of the ego's start along its route (or behind it).
+
+The ego's expected motion comes from the mutator's profile of how the reference ADS drives the empty route
+(:meth:`drivefuzz.search.mutate.Mutator._ego_profile`). Never imports libsumo.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from drivefuzz.scenario import Actor, ActorKind, NavType, Scenario
+from drivefuzz.scenario.model import EGO_LENGTH
+from drivefuzz.scenario.roadmap import PASSENGER
+
+if TYPE_CHECKING:  # pragma: no cover
+    from drivefuzz.search.mutate import Mutator
+
+NPC_DECEL = 4.5  # [m/s^2] SUMO's default comfortable deceleration of a passenger car
+EGO_DECEL = 5.0  # [m/s^2] a careful driver's firm braking on a dry road
+REACTION = 0.75  # [s] a careful driver's reaction time
+MARGIN = 2.0  # [m] left over after a stop
+VEHICLE_LENGTH = 5.0  # [m] SUMO's default passenger car
+
+
+def stopping_distance(speed: float, decel: float, reaction: float = 0.0) -> float:
+    """[m] to stop from ``speed`` [m/s] braking at ``decel`` [m/s^2] after ``reaction`` [s]."""
+    return speed * reaction + speed * speed / (2.0 * decel)
+
+
+def route_distance(mut: "Mutator", sc: Scenario, lane_id: str, pos: float) -> float | None:
+    """[m] along the ego's route from its front bumper at the start to ``pos`` on ``lane_id``; negative behind
+    the ego (its own lane, or a lane that feeds it); None when the lane is elsewhere."""
+    rmap, m = mut.rmap, sc.mission
+    edge = rmap.lane(lane_id).getEdge().getID()
+    route = mut._route(sc)
+    if edge in route:
+        i = route.index(edge)
+        return sum(rmap.edge(e).getLength() for e in route[:i]) + pos - m.start_pos
+    for inc in rmap.lane(m.start_lane).getIncoming():  # a lane that feeds the ego's start lane
+        if inc.getID() == lane_id:
+            return -(m.start_pos + mut._via_length(lane_id, m.start_lane) + inc.getLength() - pos)
+    return None
+
+
+def _ego_at(mut: "Mutator", sc: Scenario, t: float) -> tuple[float, float]:
+    """(distance [m] covered by the ego's front bumper, speed [m/s]) expected at time ``t`` [s]."""
+    s, ts = mut._ego_profile(sc)
+    d = float(np.interp(t, ts, s))
+    j = int(np.clip(np.searchsorted(ts, t), 1, len(ts) - 1))
+    v = (s[j] - s[j - 1]) / max(ts[j] - ts[j - 1], 1e-6)
+    return d, float(v)
+
+
+def unfair(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
+    """Why ``actor`` in ``sc`` would leave a careful ego no way out, or None when it is fair."""
+    d = route_distance(mut, sc, actor.start_lane, actor.start_pos)
+    if actor.kind is ActorKind.PEDESTRIAN:
+        if actor.nav is NavType.LINEAR and d is not None:
+            return _jaywalker(mut, sc, actor, d)
+        if actor.nav is NavType.IMMOBILE and d is not None and 0.0 <= d < mut.cfg.immobile_min_range:
+            return f"stands {d:.1f} m ahead of the ego's start"
+        return None
+    if d is None:
+        return None
+    if actor.nav is NavType.IMMOBILE and actor.depart <= 0.0 and 0.0 <= d < mut.cfg.immobile_min_range:
+        return f"stands {d:.1f} m ahead of the ego's start"
+    ego_front, ego_v = _ego_at(mut, sc, actor.depart)
+    # SUMO's lane position of a vehicle is its front bumper
+    gap_behind = ego_front - EGO_LENGTH - d  # actor's front -> ego's rear
+    gap_ahead = d - VEHICLE_LENGTH - ego_front  # ego's front -> actor's rear
+    if gap_behind > -1.0:  # starts behind the ego
+        if actor.nav is NavType.LINEAR:
+            return "a reckless vehicle behind the ego (no driver can escape it)"
+        need = stopping_distance(actor.speed, NPC_DECEL) + MARGIN
+        if actor.nav is not NavType.IMMOBILE and gap_behind < need:
+            return f"{gap_behind:.1f} m behind the ego at {actor.speed:.1f} m/s, needs {need:.1f} m to stop"
+        return None
+    if actor.depart > 0.0:  # appears later, ahead of the ego (or on it)
+        need = stopping_distance(ego_v, EGO_DECEL, REACTION) + MARGIN
+        if gap_ahead < need:
+            return f"appears {gap_ahead:.1f} m ahead of the ego at {actor.depart:.1f} s, it needs {need:.1f} m"
+    return None
+
+
+def _jaywalker(mut: "Mutator", sc: Scenario, actor: Actor, d: float) -> str | None:
+    """A walker crossing the ego's route at ``d`` [m] must reach the ego's lane when the ego can still stop
+    (or after it has passed)."""
+    rmap = mut.rmap
+    lane = rmap.lane(actor.start_lane)
+    road = [l for l in lane.getEdge().getLanes() if l.allows(PASSENGER)]
+    if not road or actor.speed <= 0.0:
+        return None
+    # walking distance to the nearest road lane's edge: half its own lane, and any lanes in between
+    between = sum(l.getWidth() for l in lane.getEdge().getLanes()
+                  if min(lane.getIndex(), road[0].getIndex()) < l.getIndex() < max(lane.getIndex(), road[-1].getIndex())
+                  and not l.allows(PASSENGER))
+    t_enter = actor.depart + (lane.getWidth() / 2 + between) / actor.speed if lane not in road else actor.depart
+    ego_front, ego_v = _ego_at(mut, sc, t_enter)
+    remaining = d - ego_front
+    if remaining < -EGO_LENGTH:  # the ego has passed
+        return None
+    need = stopping_distance(ego_v, EGO_DECEL, REACTION)
+    if remaining < need:
+        return (f"steps onto the road at {t_enter:.1f} s, {max(remaining, 0.0):.1f} m ahead of the ego, "
+                f"which needs {need:.1f} m to stop")
+    return None
+
+
+def lane_limit(mut: "Mutator", lane_id: str) -> float:
+    """[m/s] the lane's speed limit (a floor of 5 m/s for odd networks)."""
+    return max(mut.rmap.geom(lane_id).speed, 5.0) if math.isfinite(mut.rmap.geom(lane_id).speed) else 13.9

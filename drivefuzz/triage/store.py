@@ -1,0 +1,167 @@
+"""From a misbehaviour to a finding: attribution, signature, one folder per signature, reproduction rate.
+
+A seed job hands every execution whose oracles fired to :meth:`FindingStore.triage`:
+
+1. **Attribution by the rules** on the trace (:func:`drivefuzz.triage.attribute.attribute`, no replay).
+2. **Signature** (:func:`drivefuzz.triage.signature.signature`): if a folder for it exists already, the
+   execution is one more hit of that finding (or incident), and nothing else runs.
+3. For a **new** signature: the counterfactual replay by the careful driver when the rules blamed the ego
+   (the verdict, and so the signature, may change to ``other``), then the **reproduction rate** under small
+   perturbations (:mod:`drivefuzz.triage.reproduce`), then the folder is written.
+
+Folders: ``findings/<signature>-<oracle>/`` when the ego is at fault (or it is unclear), ``incidents/...``
+when it is not. Each holds the SUMO files, ``scenario.json``, the trace, ``verdict.json`` (misbehaviours,
+attribution, signature, reproduction, the execution that found it) and ``replay.sh``. How many executions
+hit a signature, and which, is in the campaign index; the campaign process writes it into each folder's
+``hits.json`` (:func:`write_hits`).
+
+Simulator crashes, hangs and plugin errors have no trace: their signature is their kind and error type.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import drivefuzz
+from drivefuzz.oracle import Misbehavior
+from drivefuzz.scenario.sumofiles import write_scenario
+from drivefuzz.storage import atomic_dir, atomic_write_json, atomic_write_text
+
+FINDINGS = "findings"
+INCIDENTS = "incidents"
+
+
+def replay_script() -> str:
+    return ("#!/bin/sh\n# Runs this finding again and checks it reproduces.\n"
+            'cd "$(dirname "$0")" && exec drivefuzz replay .\n')
+
+
+@dataclass(frozen=True)
+class Triaged:
+    """Where an execution's misbehaviour went: ``rel`` (folder under the campaign), new or a repeat."""
+
+    rel: str
+    signature: str
+    fault: str
+    new: bool
+    executions: int  # what triage ran (counterfactual and reproduction)
+
+
+@dataclass
+class TriageConfig:
+    counterfactual: bool = True  # replay with the careful driver when the rules blame the ego
+    reproduce: int = 5  # perturbed reruns of each new signature's representative (0: none)
+
+
+def _crash_key(m: Misbehavior) -> str:
+    return hashlib.sha256(f"{m.oracle}/{m.kind}".encode()).hexdigest()[:12]
+
+
+class FindingStore:
+    """The findings and incidents of one campaign directory, as seen by one seed job."""
+
+    def __init__(self, out: Path, rmap, run: Callable[[Any], Any], config: TriageConfig | None = None,
+                 extra_verdict: dict[str, Any] | None = None):
+        """``run(scenario) -> (misbehaviors, trace) | None`` executes a scenario (None: it failed)."""
+        self.out = Path(out)
+        self.rmap = rmap
+        self.run = run
+        self.cfg = config or TriageConfig()
+        self.extra = extra_verdict or {}
+
+    def _existing(self, key: str) -> str | None:
+        for sub in (FINDINGS, INCIDENTS):
+            folder = self.out / sub
+            if folder.is_dir():
+                for p in folder.glob(f"{key}-*"):
+                    if (p / "verdict.json").exists():
+                        return f"{sub}/{p.name}"
+        return None
+
+    def triage(self, scenario, misbehaviors: Sequence[Misbehavior], trace, key: str, termination: str,
+               extra: dict[str, Any] | None = None) -> Triaged:
+        """File the execution ``key`` of ``scenario`` whose oracles reported ``misbehaviors``."""
+        from drivefuzz.triage.attribute import Fault, attribute
+        from drivefuzz.triage.signature import signature
+
+        m = misbehaviors[0]
+        if trace is None:  # the simulator crashed or hung, or a plugin raised
+            sig_key, fault, att, sig = _crash_key(m), "ego", None, {"oracle": m.oracle, "kind": m.kind}
+        else:
+            att = attribute(scenario, trace, m, self.rmap)
+            sig_obj = signature(scenario, trace, m, self.rmap, att)
+            sig_key, fault, sig = sig_obj.key, att.fault.value, _sig_dict(sig_obj)
+        seen = self._existing(sig_key)
+        if seen:
+            return Triaged(seen, sig_key, fault, False, 0)
+        spent = 0
+        if trace is not None and att.fault is Fault.EGO and self.cfg.counterfactual:
+            def replay(sc):
+                nonlocal spent
+                spent += 1
+                got = self.run(sc)
+                return ((), None) if got is None else got
+
+            att2 = attribute(scenario, trace, m, self.rmap, replay=replay)
+            if att2.fault is not att.fault:
+                sig_obj = signature(scenario, trace, m, self.rmap, att2)
+                sig_key, fault, sig = sig_obj.key, att2.fault.value, _sig_dict(sig_obj)
+                seen = self._existing(sig_key)
+                if seen:
+                    return Triaged(seen, sig_key, fault, False, spent)
+            att = att2
+        reproduction = None
+        if trace is not None and self.cfg.reproduce > 0:
+            from drivefuzz.triage.reproduce import reproduction_rate
+
+            def rerun(sc):
+                nonlocal spent
+                spent += 1
+                got = self.run(sc)
+                return None if got is None else got[0]
+
+            reproduction = reproduction_rate(scenario, m, rerun, k=self.cfg.reproduce).as_dict()
+        sub = INCIDENTS if fault == "other" else FINDINGS
+        rel = f"{sub}/{sig_key}-{m.oracle}"
+        with atomic_dir(self.out / rel) as tmp:
+            write_scenario(scenario, tmp)
+            if trace is not None:
+                trace.save(tmp / "trace")
+            atomic_write_json(tmp / "verdict.json", {
+                "misbehaviors": [x.as_dict() for x in misbehaviors], "termination": termination,
+                "scenario_hash": scenario.content_hash(), "key": key,
+                "seed_index": int(key.split("/")[0]) if key.split("/")[0].isdigit() else 0,
+                "frames": None if trace is None else trace.n_frames,
+                "attribution": None if att is None else att.as_dict(), "signature": {"key": sig_key, **sig},
+                "reproduction": reproduction, "triage_executions": spent,
+                "drivefuzz": drivefuzz.__version__, **self.extra, **(extra or {}),
+            })
+            atomic_write_text(tmp / "replay.sh", replay_script())
+            os.chmod(tmp / "replay.sh", 0o755)
+        return Triaged(rel, sig_key, fault, True, spent)
+
+
+def _sig_dict(sig) -> dict[str, Any]:
+    d = {k: (v.value if hasattr(v, "value") else v) for k, v in asdict(sig).items() if k != "key"}
+    d["label"] = getattr(sig, "label", "")
+    return d
+
+
+def write_hits(out: Path, hits: dict[str, list[str]]) -> None:
+    """``hits.json`` in each finding or incident folder: how many executions hit it, and which (key order)."""
+    for rel, keys in hits.items():
+        folder = Path(out) / rel
+        if (folder / "verdict.json").exists():
+            path = folder / "hits.json"
+            data = {"count": len(keys), "executions": keys}
+            try:
+                if json.loads(path.read_text()) == data:
+                    continue
+            except (OSError, ValueError):
+                pass
+            atomic_write_json(path, data)

@@ -1,0 +1,84 @@
+"""Fair adversaries: every placed or moved actor leaves a careful ego a way out (real networks, real SUMO)."""
+
+from __future__ import annotations
+
+import random
+
+import numpy as np
+import pytest
+
+from drivefuzz.scenario import Actor, ActorKind, NavType
+from drivefuzz.search.fairness import unfair
+from drivefuzz.search.mutate import MutationConfig, Mutator
+
+
+@pytest.fixture
+def mut(town):
+    return Mutator(town, MutationConfig())
+
+
+def _vehicle(town, sc, nav, pos, speed, depart=0.0):
+    lane = sc.mission.start_lane
+    return Actor(id="v9", kind=ActorKind.VEHICLE, nav=nav, start_lane=lane, start_pos=pos, speed=speed, depart=depart,
+                 dest_edge=None if nav is NavType.IMMOBILE else sc.mission.goal_edge)
+
+
+def test_a_reckless_car_behind_the_ego_is_refused(town, town_scenario, mut):
+    assert "reckless" in unfair(mut, town_scenario, _vehicle(town, town_scenario, NavType.LINEAR, 1.0, 5.0))
+
+
+def test_a_follower_must_be_able_to_stop_for_a_stopped_ego(town, town_scenario, mut):
+    # the ego's front bumper is at 10 m: a car 0.5 m behind its rear at 13 m/s cannot stop, one at 2 m/s can
+    sc = town_scenario
+    assert "needs" in unfair(mut, sc, _vehicle(town, sc, NavType.AUTOPILOT, 4.9, 13.0))
+    assert unfair(mut, sc, _vehicle(town, sc, NavType.AUTOPILOT, 1.0, 2.0)) is None
+
+
+def test_an_obstacle_is_not_placed_at_the_ego_start(town, town_scenario, mut):
+    sc = town_scenario
+    assert "ahead of the ego's start" in unfair(mut, sc, _vehicle(town, sc, NavType.IMMOBILE, 20.0, 0.0))
+    assert unfair(mut, sc, _vehicle(town, sc, NavType.IMMOBILE, 60.0, 0.0)) is None
+
+
+def test_an_actor_does_not_pop_up_inside_the_ego_stopping_distance(town, town_scenario, mut):
+    sc = town_scenario
+    s, t = mut._ego_profile(sc)
+    t_at_60 = float(np.interp(50.0, s, t))  # when the ego's front is 50 m on, i.e. at lane position 60 m
+    assert "appears" in unfair(mut, sc, _vehicle(town, sc, NavType.AUTOPILOT, 70.0, 3.0, depart=round(t_at_60, 1)))
+    assert unfair(mut, sc, _vehicle(town, sc, NavType.AUTOPILOT, 70.0, 3.0, depart=0.0)) is None
+
+
+def test_a_jaywalker_steps_out_only_when_the_ego_can_stop(town, town_scenario, mut):
+    sc = town_scenario
+    spot = mut._spot_along(sc, random.Random(0), 60.0, "pedestrian")
+    assert spot is not None
+    d = mut.rmap.geom(spot.lane).length  # noqa: F841 (the lane exists)
+    s, t = mut._ego_profile(sc)
+    late = round(float(np.interp(55.0, s, t)), 1)  # the ego is 5 m from the crossing point: it cannot stop
+    walker = dict(id="p9", kind=ActorKind.PEDESTRIAN, nav=NavType.LINEAR, start_lane=spot.lane, start_pos=spot.pos,
+                  speed=2.0, dest_xy=(spot.x + 20.0, spot.y))
+    assert "steps onto the road" in unfair(mut, sc, Actor(**walker, depart=late))
+    assert unfair(mut, sc, Actor(**walker, depart=0.0)) is None  # 60 m ahead at the start: time to stop
+
+
+@pytest.mark.parametrize("strategy", ["all", "entropy", "congestion", "maneuver"])
+def test_every_successor_is_fair(town, town_scenario, strategy):
+    """Whatever the strategy, catalogue or targeted move, no actor of a successor breaks a timing rule."""
+    mut = Mutator(town, MutationConfig())
+    sc = town_scenario
+    for k in range(25):
+        m = mut.successor(sc, strategy, random.Random(f"{strategy}/{k}"), hint=sc.actors[-1].id if sc.actors else None)
+        sc = m.scenario
+        for i, a in enumerate(sc.actors):
+            others = sc.model_copy(update={"actors": sc.actors[:i] + sc.actors[i + 1:]})
+            assert unfair(mut, others, a) is None, (m.description, a)
+    assert sc.actors
+
+
+def test_a_moved_actor_is_rechecked(town, town_scenario, mut):
+    """A position change that would put a car right behind the ego is not applied (it was, 6.2 m closer)."""
+    sc = town_scenario.model_copy(update={"actors": (_vehicle(town, town_scenario, NavType.AUTOPILOT, 1.0, 2.0),)})
+    for k in range(30):
+        m = mut.target(sc, 0, random.Random(k))
+        others = sc.model_copy(update={"actors": ()})
+        assert unfair(mut, others, m.scenario.actors[0]) is None, m.description
