@@ -355,18 +355,20 @@ def _print_summary(campaign, findings, out_dir, report_all: bool = False) -> Non
 
 
 def _print_findings(title: str, findings) -> None:
+    """One row per signature: hits, reproduction, simulated time of the event, the signature; then the replay."""
     from drivefuzz.campaign.fuzz import replay_command
 
     if not findings:
         return
     click.echo(title)
-    click.echo(f"{'#':>3} {'hits':>5}  {'reproduced':<11} {'sim time':>8}  {'signature':<58} replay")
+    click.echo(f"{'#':>3} {'hits':>5}  {'reproduced':<16} {'sim time':>9}  signature / replay")
     for i, f in enumerate(findings):
         m = f.misbehavior
-        when = f"{m.time:>7.2f}s" if m.frame >= 0 else "       -"
+        when = f"{m.time:>8.2f}s" if m.frame >= 0 else "        -"
         rep = f.reproduction or {}
-        rate = f"{rep['reproduced']}/{rep['runs']}" if rep else "-"
-        click.echo(f"{i:>3} {f.hits:>5}  {rate:<11} {when}  {f.label[:58]:<58} {replay_command(f.path)}")
+        rate = f"{rep['reproduced']}/{rep['runs']} {'robust' if rep.get('robust') else 'knife-edge'}" if rep else "-"
+        click.echo(f"{i:>3} {f.hits:>5}  {rate:<16} {when}  {f.label}")
+        click.echo(f"{'':>38}{replay_command(f.path)}")
 
 
 def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):

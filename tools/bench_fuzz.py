@@ -15,7 +15,9 @@ Stages (keys of the ``timings`` column):
     record      recording the trace
     oracles     the misbehaviour oracles
     setup       writing and validating the SUMO files, ADS reset, first step bookkeeping
-    quality     the driving-quality score
+    quality     the feedback: risk score and driving-quality score
+    triage      attribution, signature, and for a new signature the counterfactual replay and the
+                reproduction reruns (whole executions of their own, counted here, not as executions)
     mutation    generate + mutate, with their retries
     storage     journal, index, corpus and finding directories
     isolation   handing the execution to the simulation-host child process and back
@@ -53,13 +55,15 @@ STAGES = [
     ("record", "trace recording"),
     ("oracles", "oracles"),
     ("setup", "execution setup"),
-    ("quality", "quality score"),
+    ("quality", "feedback (risk + quality)"),
+    ("triage", "triage (+ its reruns)"),
     ("mutation", "mutation (+ retries)"),
     ("storage", "storage"),
     ("isolation", "crash isolation (IPC)"),
 ]
 #: The paper's white boxes: what drivefuzz adds to simulating and driving (not SUMO, not the ADS).
-DRIVEFUZZ_ONLY = ("observe", "world", "record", "oracles", "setup", "quality", "mutation", "storage", "isolation")
+DRIVEFUZZ_ONLY = ("observe", "world", "record", "oracles", "setup", "quality", "mutation", "storage", "isolation",
+                  "triage")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -69,6 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="campaign RNG seed [0]")
     ap.add_argument("--seeds", type=int, default=4, help="how many town seeds to fuzz [4]")
     ap.add_argument("--population", type=int, default=4)
+    ap.add_argument("--reproduce", type=int, default=5, help="reruns of each new signature [5]")
     ap.add_argument("--out", type=Path, help="keep the campaign directory here (default: a temporary one)")
     args = ap.parse_args(argv)
 
@@ -80,7 +85,7 @@ def main(argv: list[str] | None = None) -> int:
     # spread the executions over the seeds: each seed's job gets about the same share
     cycles = -(-args.execs // (len(seeds) * args.population))
     cfg = FuzzConfig(cycles=cycles, population=args.population, strategy=args.strategy, seed=args.seed,
-                     max_execs=args.execs, continue_after_finding=True)
+                     max_execs=args.execs, continue_after_finding=True, reproduce=args.reproduce)
     tmp = None
     out = args.out
     if out is None:
@@ -91,6 +96,7 @@ def main(argv: list[str] | None = None) -> int:
         Campaign(out, seeds, cfg).run()
         total = time.perf_counter() - t0
         report(out / "index.sqlite", total, args, cfg)
+        triage_cost(out)
     finally:
         if tmp:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -139,6 +145,27 @@ def report(index: Path, total: float, args, cfg) -> None:
     print(f"outside SUMO stepping (physics, ADS and drivefuzz): {100 * own / total:.1f} % of the time")
     print(f"drivefuzz's own share (not SUMO, not the ADS, not the physics): {100 * dfz / total:.1f} %  "
           f"(the paper: 6 %)")
+
+
+def triage_cost(out: Path) -> None:
+    """What triage cost per new signature, in executions' worth (the goal: at most 15)."""
+    recs = []
+    for path in sorted((out / "jobs").glob("*/journal.jsonl")):
+        recs += [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+    recs = [r for r in recs if r.get("event") == "end"]
+    plain = [r["wall_time"] for r in recs if r.get("wall_time") and not r.get("signature")]
+    new = [r for r in recs if r.get("triage_execs")]
+    hits = [r for r in recs if r.get("signature") and not r.get("triage_execs")]
+    if not new or not plain:
+        print("triage: no new signature in this campaign")
+        return
+    mean_exec = sum(plain) / len(plain)
+    t_new = [r["timings"].get("triage", 0.0) for r in new]
+    t_hit = [r["timings"].get("triage", 0.0) for r in hits] or [0.0]
+    print(f"triage: {len(new)} new signature(s), {sum(r['triage_execs'] for r in new)} reruns "
+          f"({sum(r['triage_execs'] for r in new) / len(new):.1f} each); per new signature {sum(t_new) / len(new):.2f} s "
+          f"= {sum(t_new) / len(new) / mean_exec:.1f} executions' worth (mean execution {mean_exec:.3f} s); "
+          f"a repeat of a known signature {1000 * sum(t_hit) / len(t_hit):.1f} ms")
 
 
 if __name__ == "__main__":
