@@ -24,15 +24,26 @@ class PurePursuit:
 
 
 class SpeedController:
-    """Feed-forward of the planned acceleration plus a proportional term on speed error."""
+    """Feed-forward of the planned acceleration plus a proportional term on speed error.
 
-    def __init__(self, max_accel: float = 3.5, max_decel: float = 9.0, kp: float = 0.4):
+    The proportional term only adds braking while the planner brakes above its target speed, and
+    at most ``max_feedback`` [m/s^2]: the planner has already chosen how hard to brake, and an
+    unbounded term turned a drop of the target (a lower speed limit) into full braking.
+    """
+
+    def __init__(self, max_accel: float = 3.5, max_decel: float = 9.0, kp: float = 0.4,
+                 max_feedback: float = 1.0):
         self.max_accel = max_accel
         self.max_decel = max_decel
         self.kp = kp
+        self.max_feedback = max_feedback
 
     def pedals(self, accel: float, speed: float, target: float) -> tuple[float, float]:
-        a = accel + self.kp * (target - speed) * (1.0 if accel < 0 and target < speed else 0.0)
+        """(throttle, brake) in [0, 1] for the planned ``accel`` [m/s^2] at ``speed`` towards
+        ``target`` [m/s]."""
+        a = accel
+        if accel < 0 and target < speed:
+            a -= min(self.kp * (speed - target), self.max_feedback)
         if a >= 0.0:
             return min(a / self.max_accel, 1.0), 0.0
         if speed < 0.05 and accel <= 0.0:

@@ -12,6 +12,18 @@ Options (``--ads-option K=V``):
 - ``speed_margin``: fraction of the speed limit it aims for (default 0.95).
 - ``max_lat_accel``: comfort limit in curves [m/s^2].
 - ``sensor_range``: clear-weather sensor range [m].
+
+Target speed. The lowest of: the speed limit (times ``speed_margin``); the curvature profile
+(:func:`ego.planning.speed_profile`: the curve limit ``sqrt(LAT_ACCEL_SHARE * max_lat_accel / k)``
+with a :data:`CURVE_DECEL` braking ramp before every bend, fixed along the path, so it does not
+chatter); and the assured clear distance ahead: the speed from which the car stops, after
+:data:`ACDA_REACTION` s, at :data:`ACDA_DECEL` (less on a wet road) within the range its
+sensors have in the current weather, less :data:`ACDA_MARGIN` and half its length. In clear
+weather that is about 32 m/s (100 m of range), in dense fog about 9 m/s (15 m).
+
+Braking. Reaching that target speed never brakes harder than :data:`FREE_DECEL`: the speed limit
+and the bends are known in advance and are no hazard. Leaders, pedestrians, a red light and the
+goal keep their own terms, which may brake fully.
 """
 
 from __future__ import annotations
@@ -24,7 +36,8 @@ from drivefuzz.sim.physics import VehicleParams
 
 from ego.actuation import PurePursuit, SpeedController
 from ego.perception import HEADING, LENGTH, PED, SPEED, WIDTH, X, Y, Perception
-from ego.planning import CELL, build_path, idm_accel, lawful_route, stop_accel
+from ego.planning import (CELL, assured_clear_speed, build_path, idm_accel, lawful_route, profile_accel,
+                          speed_profile, stop_accel)
 from ego.sensing import Sensors, SensorSpec
 
 FAULTS = ("none", "speeding", "no_traffic_lights", "no_control", "steer_left")
@@ -32,6 +45,27 @@ FAULTS = ("none", "speeding", "no_traffic_lights", "no_control", "steer_left")
 STEER_LEFT_DELAY = 1.0
 #: Steering command of the ``steer_left`` fault, as a fraction of full lock (0.15 rad at the road wheels).
 STEER_LEFT_COMMAND = 0.25
+#: [m/s^2] deceleration of the braking ramp before a bend in the curvature profile.
+CURVE_DECEL = 1.5
+#: The curvature profile plans for this share of ``max_lat_accel``: the path's curvature is a 5 m
+#: average and the tracker turns in a little harder, so planning at the full limit overshot it
+#: (2.64 m/s^2 against 2.5 at the intersection seed 003's left turn).
+LAT_ACCEL_SHARE = 0.9
+#: [m] a bend's limit holds from this far before it: the path tracker's shortest look-ahead (4 m from
+#: the rear axle), where the car starts to turn.
+CURVE_LEAD = 4.0
+#: [s] the car follows the curvature profile this far ahead of it (at least :data:`PROFILE_MIN_M`).
+PROFILE_LEAD_S = 1.0
+#: [m] shortest look-ahead on the curvature profile.
+PROFILE_MIN_M = 4.0
+#: [m/s^2] the hardest braking used to reach the target speed (limit, bends, visibility).
+FREE_DECEL = 3.0
+#: [m/s^2] assured clear distance: the deceleration it counts on to stop on a dry road ...
+ACDA_DECEL = 6.0
+#: ... after this reaction [s] ...
+ACDA_REACTION = 0.3
+#: ... short of the sensor range by this [m] (plus half its own length): half a car and a gap.
+ACDA_MARGIN = 3.5
 
 
 class ReferenceADS(ADS):
@@ -54,7 +88,8 @@ class ReferenceADS(ADS):
         self.route = lawful_route(roadmap, tuple(mission.route), mission.start_lane)
         self.path, self.edge_s = build_path(roadmap, self.route, mission.start_lane, mission.start_pos,
                                             mission.goal_edge, mission.goal_pos)
-        self._curvature = self.path.curvature.tolist()  # [1/m] a slice of it is read every step
+        self._profile = speed_profile(self.path, LAT_ACCEL_SHARE * self.options.max_lat_accel, CURVE_DECEL,
+                                      CURVE_LEAD)  # [m/s] per point
         _, self.s_goal, _ = self.path.locate(*mission.goal_xy, hint=0, window=len(self.path.pts))
         self.path_idx = 0
         self.params = params
@@ -78,28 +113,61 @@ class ReferenceADS(ADS):
         ch, sh = math.cos(ego.heading), math.sin(ego.heading)
         self.path_idx, s_c, lat_c = self.path.locate(ego.x, ego.y, self.path_idx)
         self.s_center = s_c
-        half = ego.length / 2.0
         rear_off = self._rear_off
         rx, ry = ego.x - rear_off * ch, ego.y - rear_off * sh
         v = ego.speed
 
-        # target speed: limit, curvature ahead
-        limit = world.speed_limit
+        v0 = self._target_speed(obs, world.speed_limit, det.range_m)
+        accel = max(idm_accel(v, v0, math.inf, 0.0), -FREE_DECEL)
+        accel = min(accel, max(profile_accel(self._profile, self.path, self.path_idx, v,
+                                             max(v * PROFILE_LEAD_S, PROFILE_MIN_M)), -FREE_DECEL))
+        accel = min(accel, self._obstacle_accel(world, ego, s_c, lat_c, v0))
+        accel = min(accel, self._light_accel(world, v))
+
+        # goal: stop with the centre on the goal point
+        to_goal = self.s_goal - s_c
+        accel = min(accel, stop_accel(v, to_goal, comfort=2.5))
+        if to_goal < 1.5 and v < 0.5:
+            self._done = True
+        if self._done:
+            accel = min(accel, -3.0)
+
+        throttle, brake = self.speed.pedals(accel, v, v0)
+        s_rear = s_c - rear_off
+        steer = self.tracker.steer(self.path, s_rear, rx, ry, ego.heading, v)
+        if fault == "steer_left":
+            # open loop: a bias on the tracker's command would be corrected by the tracker itself
+            if self._fault_t0 is None:
+                self._fault_t0 = obs.t
+            if obs.t - self._fault_t0 >= STEER_LEFT_DELAY:
+                steer = STEER_LEFT_COMMAND
+        return Control(steer, throttle, brake)
+
+    def _target_speed(self, obs: Observation, limit: float, range_m: float) -> float:
+        """[m/s] the speed it aims for here: the limit, the curvature profile, the assured clear
+        distance ahead in the sensor range ``range_m`` [m] it has now, and the ``cruise_speed`` cap."""
         v0 = limit * self.options.speed_margin
-        if fault == "speeding":
+        if self.options.fault == "speeding":
             v0 = limit * 1.3 + 2.0
         if self.options.cruise_speed > 0:
             v0 = min(v0, self.options.cruise_speed)
-        i0 = self.path_idx
-        i1 = min(i0 + int(max(v * 3.0, 15.0)), len(self.path.pts) - 1)
-        kmax = max(self._curvature[i0:i1 + 1]) if i1 > i0 else 0.0
-        if kmax > 1e-4:
-            v0 = min(v0, math.sqrt(self.options.max_lat_accel / kmax))
-        accel = idm_accel(v, v0, math.inf, 0.0)
+        v0 = min(v0, self._profile[self.path_idx])
+        w = obs.weather
+        # a wet road grips less (the driver sees it): count on less braking
+        decel = ACDA_DECEL * (1.0 - 0.3 * max(w.wetness, w.rain) / 100.0)
+        clear = range_m - ACDA_MARGIN - obs.ego.length / 2.0
+        return min(v0, max(assured_clear_speed(clear, decel, ACDA_REACTION), 1.0))
 
-        # obstacles in the path: leaders and pedestrians (pedestrians also predicted 1.5 s ahead).
-        # An object in the corridor (at most ~4 m to the side) is within a grid cell of the path,
-        # and at most ~90 m (plus the car's own offset from the path) from the car.
+    def _obstacle_accel(self, world, ego, s_c: float, lat_c: float, v0: float) -> float:
+        """Acceleration [m/s^2] the obstacles in the path allow (+inf: none): leaders and
+        pedestrians (pedestrians also predicted 1.5 s ahead). An object in the corridor (at most
+        ~4 m to the side) is within a grid cell of the path, and at most ~90 m (plus the car's own
+        offset from the path) from the car."""
+        v = ego.speed
+        half = ego.length / 2.0
+        # the free-road part of the IDM is handled (and its braking bounded) by the caller
+        v_free = max(v0, v)
+        accel = math.inf
         path = self.path
         lo, hi = path.window(self.path_idx, 120)
         reach = 90.0 + abs(lat_c)
@@ -124,31 +192,15 @@ class ReferenceADS(ADS):
                     continue
                 gap = ahead - half - tr[LENGTH] / 2
                 dv = v - tr[SPEED] * max(math.cos(tr[HEADING] - ego.heading), 0.0)
-                accel = min(accel, idm_accel(v, v0, gap, dv))
+                accel = min(accel, idm_accel(v, v_free, gap, dv))
+        return accel
 
-        # traffic light
-        if world.tl_state is not None and world.tl_state in "rRyYu" and world.tl_distance < 120:
-            dist = world.tl_distance - 1.0
-            if world.tl_state in "yY" and dist < v * v / (2 * 4.0):
-                pass  # too close to stop comfortably on yellow: go
-            else:
-                accel = min(accel, stop_accel(v, dist))
-
-        # goal: stop with the centre on the goal point
-        to_goal = self.s_goal - s_c
-        accel = min(accel, stop_accel(v, to_goal, comfort=2.5))
-        if to_goal < 1.5 and v < 0.5:
-            self._done = True
-        if self._done:
-            accel = min(accel, -3.0)
-
-        throttle, brake = self.speed.pedals(accel, v, v0)
-        s_rear = s_c - rear_off
-        steer = self.tracker.steer(self.path, s_rear, rx, ry, ego.heading, v)
-        if fault == "steer_left":
-            # open loop: a bias on the tracker's command would be corrected by the tracker itself
-            if self._fault_t0 is None:
-                self._fault_t0 = obs.t
-            if obs.t - self._fault_t0 >= STEER_LEFT_DELAY:
-                steer = STEER_LEFT_COMMAND
-        return Control(steer, throttle, brake)
+    def _light_accel(self, world, v: float) -> float:
+        """Acceleration [m/s^2] the next traffic light allows (+inf: none): stop for red, and for
+        yellow unless too close to stop comfortably."""
+        if world.tl_state is None or world.tl_state not in "rRyYu" or world.tl_distance >= 120:
+            return math.inf
+        dist = world.tl_distance - 1.0
+        if world.tl_state in "yY" and dist < v * v / (2 * 4.0):
+            return math.inf  # too close to stop comfortably on yellow: go
+        return stop_accel(v, dist)

@@ -8,8 +8,16 @@ be reached without crossing a solid line, so a lane needed after an edge where
 changing is forbidden is taken before that edge. If the start lane cannot reach
 such a lane at all, :func:`lawful_route` drives another way to the goal.
 The speed plan is an intelligent-driver-model acceleration towards the lowest
-of: the speed limit, a curvature limit, the leader, a red light's stop line,
-a pedestrian in the path, and the goal.
+of: the speed limit, a curvature limit, the speed from which the car can stop
+within what it sees, the leader, a red light's stop line, a pedestrian in the
+path, and the goal.
+
+The curvature limit is a :func:`speed_profile` along the path, computed once per
+mission: at every path point the highest speed [m/s] from which the car can slow
+down, at a comfortable deceleration, to the curvature limit of every point after
+it. It depends on the distance along the path only, never on the car's speed, so
+the target speed cannot flip between frames as the car slows (a look-ahead window
+of ``3 v`` metres did: a tight bend dropped in and out of it on alternate frames).
 """
 
 from __future__ import annotations
@@ -256,6 +264,56 @@ def build_path(rmap: RoadMap, route: tuple[str, ...], start_lane: str, start_pos
     return Path(pts, s, curv), edge_s
 
 
+def speed_profile(path: Path, max_lat_accel: float, decel: float, lead_m: float = 0.0,
+                  v_max: float = 100.0) -> list[float]:
+    """Per path point, the highest speed [m/s] that respects the curvature limit
+    ``sqrt(max_lat_accel / curvature)`` of every point up to ``lead_m`` metres ahead (the path
+    tracker steers towards a point ahead, so the car turns before its centre reaches the bend)
+    and, braking at ``decel`` [m/s^2], of every later point (a backward pass; ``v_max`` [m/s]
+    where the path is straight)."""
+    k = path.curvature.tolist()
+    s = path.s.tolist()
+    n = len(k)
+    k_min = max_lat_accel / (v_max * v_max)
+    lim = [math.sqrt(max_lat_accel / ki) if ki > k_min else v_max for ki in k]
+    prof = [v_max] * n
+    nxt = v_max
+    j = n - 1  # the window i..j holds the points within lead_m of point i
+    window: list[int] = []  # indices of a monotone (increasing limit) queue over the window
+    for i in range(n - 1, -1, -1):
+        while j > i and s[j] - s[i] > lead_m:
+            if window and window[0] == j:
+                window.pop(0)
+            j -= 1
+        while window and lim[window[-1]] >= lim[i]:
+            window.pop()
+        window.append(i)
+        if i < n - 1:
+            nxt = math.sqrt(nxt * nxt + 2.0 * decel * (s[i + 1] - s[i]))
+        nxt = min(lim[window[0]], nxt)
+        prof[i] = nxt
+    return prof
+
+
+def profile_accel(prof: list[float], path: Path, i: int, v: float, horizon: float) -> float:
+    """Acceleration [m/s^2] that brings speed ``v`` [m/s] at path point ``i`` down to the profile
+    ``prof`` (:func:`speed_profile`) ``horizon`` metres ahead; +inf when the car is below it there."""
+    s = path._s
+    j = min(bisect.bisect_left(s, s[i] + horizon, i), len(s) - 1)
+    target = prof[j]
+    if target >= v or j == i:
+        return math.inf
+    return (target * target - v * v) / (2.0 * (s[j] - s[i]))
+
+
+def assured_clear_speed(clear_m: float, decel: float, reaction_s: float) -> float:
+    """[m/s] the highest speed from which the car stops within ``clear_m`` metres: ``reaction_s``
+    seconds at that speed, then braking at ``decel`` [m/s^2] (0 when ``clear_m <= 0``)."""
+    if clear_m <= 0.0:
+        return 0.0
+    return decel * (-reaction_s + math.sqrt(reaction_s * reaction_s + 2.0 * clear_m / decel))
+
+
 def idm_accel(v: float, v0: float, gap: float, dv: float, a_max: float = 2.0, b: float = 3.0,
               s0: float = 2.5, T: float = 1.2) -> float:
     """Intelligent-driver-model acceleration [m/s^2]; gap [m] to an obstacle closing at dv [m/s]."""
@@ -269,7 +327,11 @@ def idm_accel(v: float, v0: float, gap: float, dv: float, a_max: float = 2.0, b:
 def stop_accel(v: float, dist: float, comfort: float = 3.0) -> float:
     """Deceleration [m/s^2] (< 0) to stop within ``dist`` metres; +inf (no constraint) while far away."""
     if dist <= 0.3:
-        return -8.0 if v > 0.05 else -1.0
+        # at the stop point: brake fully if still moving fast (an overshoot), else just settle
+        # (a creep of ~0.3 m/s is stopped within centimetres without a jolt)
+        if v > 1.0:
+            return -8.0
+        return -2.5 if v > 0.05 else -1.0
     need = v * v / (2.0 * dist)
     if need > 0.3 * comfort:
         return -need * 1.1
