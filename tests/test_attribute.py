@@ -119,7 +119,7 @@ def test_minor_road_car_not_yielding_is_other():
 
 def test_ego_failing_to_yield_when_turning_left_is_ego():
     # the reference ADS's real bug: it turns left at B0 across a car on the major road
-    major = Actor(id="v2", kind="vehicle", nav="linear", start_lane="C0B0_1", start_pos=10.0, depart=6.0, speed=8.0,
+    major = Actor(id="v2", kind="vehicle", nav="linear", start_lane="C0B0_1", start_pos=10.0, depart=5.0, speed=8.0,
                   dest_edge="B0A0")
     m, v = judge(scenario("A0B0_1", 10.0, "B0B1", 40.0, major), with_replay=True)
     assert m.actors == ("v2",)

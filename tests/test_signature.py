@@ -77,7 +77,7 @@ def test_red_light_runner_has_one_signature_on_two_networks():
 def test_two_causes_with_the_same_actor_id_differ():
     _, _, rear = rear_ended("town", "A0B0_1", "B0C0")
     _, _, runner = red_light_runner("town")
-    major = Actor(id="v2", kind="vehicle", nav="linear", start_lane="C0B0_1", start_pos=10.0, depart=6.0, speed=8.0,
+    major = Actor(id="v2", kind="vehicle", nav="linear", start_lane="C0B0_1", start_pos=10.0, depart=5.0, speed=8.0,
                   dest_edge="B0A0")
     m, att, no_yield = run("town", "A0B0_1", 10.0, "B0B1", 40.0, major, time_limit=40.0)
     assert {x.actors for x in (m,)} == {("v2",)}
