@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import abc
 import importlib
+import inspect
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from typing import Any, ClassVar, Mapping, NamedTuple
@@ -156,24 +157,72 @@ def available_ads() -> dict[str, Any]:
     return {ep.name: ep for ep in entry_points(group=ADS_GROUP)}
 
 
-def load_ads(name: str, options: Mapping[str, Any] | None = None) -> ADS:
+def check_trusted(name: str, source: str, field: str, command_line: str | None = None) -> None:
+    """Refuse an ADS that a data file names unless it is installed or the command line names it too.
+
+    A scenario.json, a finding's verdict or a campaign's manifest may come from
+    anyone; ``package.module:Class`` from such a file would import (run) code that
+    lies beside it. Installed plugins (entry points of ``drivefuzz.ads``) were
+    installed on purpose, and ``--ads NAME`` is the user's own word.
+    """
+    eps = available_ads()
+    if name in eps or (command_line is not None and name == command_line):
+        return
+    raise InvalidConfig(source, field, f"names ADS {name!r}, which is not an installed plugin; drivefuzz does "
+                        "not import code named by a data file",
+                        f"an installed ADS ({', '.join(sorted(eps)) or 'none'}), or --ads {name} to trust it")
+
+
+def load_ads(name: str, options: Mapping[str, Any] | None = None, source: str = "--ads") -> ADS:
     """The ADS plugin registered as ``name``, or the class at ``name`` = ``package.module:Class``.
 
     The second form runs an ADS under development without packaging it; the module
-    must be importable (installed, or on PYTHONPATH).
+    must be importable (installed, or on PYTHONPATH). Callers that read ``name`` from
+    a file check it with :func:`check_trusted` first.
     """
     eps = available_ads()
     if name not in eps and ":" not in name:
-        raise InvalidConfig("--ads", None, f"no ADS plugin named {name!r}",
+        raise InvalidConfig(source, None, f"no ADS plugin named {name!r}",
                             (", ".join(sorted(eps)) or "none installed") + ", or package.module:Class")
-    try:
-        if name in eps:
+    if name in eps:
+        try:
             cls = eps[name].load()
-        else:
-            module, _, attr = name.partition(":")
-            cls = getattr(importlib.import_module(module), attr)
+        except Exception as exc:  # a broken plugin must not take the tool down with a traceback
+            raise PluginError(f"ADS plugin {name!r} ({eps[name].value}) failed to load: "
+                              f"{type(exc).__name__}: {exc}") from exc
+    else:
+        cls = _import_class(name, source)
+    problem = None
+    if not (isinstance(cls, type) and issubclass(cls, ADS)):
+        problem = "is not a drivefuzz.ads.ADS subclass"
+    elif inspect.isabstract(cls):
+        problem = f"is an abstract class (implements none of {', '.join(sorted(cls.__abstractmethods__))})"
+    if problem and name in eps:  # an installed plugin that is broken: not the user's mistake
+        raise PluginError(f"ADS plugin {name!r} ({eps[name].value}) {problem}")
+    if problem:
+        raise InvalidConfig(source, name, problem, "a subclass of drivefuzz.ads.ADS that implements reset and step")
+    try:
+        return cls(options)
+    except InvalidConfig:
+        raise
+    except Exception as exc:
+        raise PluginError(f"ADS plugin {name!r} failed to start: {type(exc).__name__}: {exc}") from exc
+
+
+def _import_class(name: str, source: str) -> Any:
+    """The object at ``package.module:Class``; a module or class that is not there is the user's mistake."""
+    module, _, attr = name.partition(":")
+    valid = "an installed ADS, or package.module:Class with the module importable (installed, or on PYTHONPATH)"
+    if not module or not attr.isidentifier():
+        raise InvalidConfig(source, name, "not of the form package.module:Class", valid)
+    try:
+        mod = importlib.import_module(module)
+    except ModuleNotFoundError as exc:
+        if exc.name is not None and module.split(".")[0] == exc.name.split(".")[0]:
+            raise InvalidConfig(source, name, f"no module named {exc.name!r}", valid) from None
+        raise PluginError(f"ADS plugin {name!r} failed to load: {type(exc).__name__}: {exc}") from exc
     except Exception as exc:  # a broken plugin must not take the tool down with a traceback
         raise PluginError(f"ADS plugin {name!r} failed to load: {type(exc).__name__}: {exc}") from exc
-    if not (isinstance(cls, type) and issubclass(cls, ADS)):
-        raise PluginError(f"ADS plugin {name!r} is not a drivefuzz.ads.ADS subclass")
-    return cls(options)
+    if not hasattr(mod, attr):
+        raise InvalidConfig(source, name, f"module {module!r} has no attribute {attr!r}", valid)
+    return getattr(mod, attr)

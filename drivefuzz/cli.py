@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import json
+import os
 import signal
 import sys
 import time
@@ -27,7 +28,7 @@ EXIT_ABORTED = 130  # a second Ctrl-C: what was finished is saved; --resume cont
 
 
 def _fail(msg: str, code: int) -> None:
-    click.echo(f"drivefuzz: error: {msg}", err=True)
+    click.echo(f"drivefuzz: error: {' '.join(str(msg).split())}", err=True)
     sys.exit(code)
 
 
@@ -43,6 +44,45 @@ def handle_errors(fn):
     return wrapper
 
 
+class _Main(click.Group):
+    """The command group: click's usage errors in one line, like every other input error."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode, **extra)
+        try:
+            rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.UsageError as exc:
+            where = exc.ctx.command_path if exc.ctx is not None else "drivefuzz"
+            _fail(f"{where}: {exc.format_message()} (see '{where} --help')", EXIT_INPUT)
+        except click.ClickException as exc:  # e.g. click.FileError
+            _fail(exc.format_message(), EXIT_INPUT)
+        except click.Abort:  # Ctrl-C outside a campaign
+            click.echo("aborted", err=True)
+            sys.exit(EXIT_ABORTED)
+        sys.exit(rv if isinstance(rv, int) else EXIT_CLEAN)
+
+
+class _Seconds(click.ParamType):
+    """A positive, finite number of seconds, at most a day."""
+
+    name = "SECONDS"
+
+    def convert(self, value, param, ctx):
+        try:
+            x = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number of seconds", param, ctx)
+        if not (0.0 < x <= MAX_SECONDS):
+            self.fail(f"{value} is not a number of seconds in (0, {MAX_SECONDS:g}]", param, ctx)
+        return x
+
+
+MAX_SECONDS = 86400.0
+#: at most this many local workers per CPU: more only queue, each holding a SUMO and semaphores
+JOBS_PER_CPU = 4
+
+
 def parse_kv(pairs: Sequence[str], option: str) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for pair in pairs:
@@ -51,32 +91,30 @@ def parse_kv(pairs: Sequence[str], option: str) -> dict[str, Any]:
             raise InvalidConfig(option, pair, "expected KEY=VALUE", "e.g. fault=speeding")
         try:
             out[key] = json.loads(raw)
-        except json.JSONDecodeError:
+        except (json.JSONDecodeError, RecursionError):
             out[key] = raw
     return out
 
 
 def load_config_file(path: str | None) -> dict[str, Any]:
     """A TOML or JSON file with sections ``[fuzz]``, ``[oracles.NAME]``, ``[mutation]``, ``[quality]``, ``[ads]``."""
-    if not path:
-        return {}
-    p = Path(path)
-    if not p.is_file():
-        raise InvalidConfig(path, None, "no such config file", "a TOML or JSON file")
-    try:
-        if p.suffix == ".json":
-            data = json.loads(p.read_text())
-        else:
-            import tomllib
+    from drivefuzz.campaign.configfile import load_config_file as load
 
-            data = tomllib.loads(p.read_text())
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise InvalidConfig(path, None, f"cannot parse ({exc})", "valid TOML or JSON") from None
-    allowed = {"fuzz", "oracles", "mutation", "quality", "ads"}
-    unknown = set(data) - allowed
-    if unknown:
-        raise InvalidConfig(path, sorted(unknown)[0], "unknown section", ", ".join(sorted(allowed)))
-    return data
+    return load(path)
+
+
+def _writable_dir(path: str | Path, option: str) -> Path:
+    """Create ``path`` (and its parents) now: an output folder that cannot be made is an input error."""
+    path = Path(path)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        probe = path / f".drivefuzz-probe-{os.getpid()}"
+        probe.touch()
+        probe.unlink()
+    except OSError as exc:
+        raise InvalidConfig(option, str(path), f"cannot write there ({exc.strerror or exc})",
+                            "a folder you may create and write") from None
+    return path
 
 
 def oracle_options(fn):
@@ -89,14 +127,18 @@ def oracle_options(fn):
 
 
 def _oracle_settings(config: dict[str, Any], kv, disabled, source: str | None = None):
-    from drivefuzz.oracle import parse_oracle_options
+    """The file's oracle settings (checked as the file's), then the command line's on top."""
+    from drivefuzz.oracle import OracleSettings, parse_oracle_options
 
-    settings = parse_oracle_options(kv, disabled, base=config.get("oracles", {}))
+    base = config.get("oracles", {})
+    if source and base:
+        OracleSettings(settings=base).instantiate(source=source)
+    settings = parse_oracle_options(kv, disabled, base=base)
     settings.instantiate()  # validate names and values now, not in the middle of a campaign
     return settings
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.group(cls=_Main, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(drivefuzz.__version__, prog_name="drivefuzz")
 def main() -> None:
     """drivefuzz: find safety-critical misbehaviour of automated-driving controllers in SUMO."""
@@ -113,6 +155,8 @@ def main() -> None:
 @handle_errors
 def run(scenario, gui, ads_name, ads_option, trace_out, oracle_kv, no_oracle, config_file):
     """Run one SCENARIO (a scenario folder or its scenario.json) and print its outcome."""
+    from drivefuzz.ads import check_trusted
+    from drivefuzz.errors import InvalidScenario, SimulationError
     from drivefuzz.sim.execute import execute
     from drivefuzz.search.quality import score_trace
     from drivefuzz.scenario import AdsSpec
@@ -120,12 +164,28 @@ def run(scenario, gui, ads_name, ads_option, trace_out, oracle_kv, no_oracle, co
 
     config = load_config_file(config_file)
     sc = load_scenario(scenario)
+    _check_runnable(sc, _manifest_of(scenario))
+    if not ads_name:  # the scenario's own ADS: imported only if installed (a scenario folder may come from anyone)
+        check_trusted(sc.ads.name, _manifest_of(scenario), "ads.name")
     if ads_name or ads_option:
         opts = dict(sc.ads.options) if not ads_name or ads_name == sc.ads.name else {}
         opts.update(parse_kv(ads_option, "--ads-option"))
-        sc = sc.model_copy(update={"ads": AdsSpec(name=ads_name or sc.ads.name, options=opts)})
-    settings = _oracle_settings(config, oracle_kv, no_oracle)
-    ex = execute(sc, oracles=settings.instantiate(), gui=gui)
+        try:
+            sc = sc.model_copy(update={"ads": AdsSpec(name=ads_name or sc.ads.name, options=opts)})
+        except ValueError as exc:  # pydantic: an option value that is not a bool, number or string
+            raise InvalidConfig("--ads-option", None, str(exc).splitlines()[-1].strip()) from None
+    settings = _oracle_settings(config, oracle_kv, no_oracle, source=config_file)
+    if trace_out:
+        _writable_dir(trace_out, "--trace")
+    try:
+        ex = execute(sc, oracles=settings.instantiate(), gui=gui)
+    except SimulationError as exc:
+        if not str(exc).startswith("SUMO failed to start"):
+            raise
+        # drivefuzz checked the scenario and its network; what SUMO still refuses is in the user's files
+        reason = str(exc).partition(": ")[2] or str(exc)
+        raise InvalidScenario(_manifest_of(scenario), None, f"SUMO refuses this scenario or its network "
+                              f"{Path(sc.network).name} ({reason})") from None
     click.echo(f"{sc.name}: {ex.termination.value} after {ex.trace.n_frames} frames "
                f"({ex.trace.n_frames * sc.sim.step_length:.1f} s simulated, {ex.wall_time:.2f} s wall)")
     for m in ex.misbehaviors:
@@ -135,28 +195,52 @@ def run(scenario, gui, ads_name, ads_option, trace_out, oracle_kv, no_oracle, co
         q = score_trace(ex.trace)
         click.echo(f"  quality score {q.score:.2f} ({json.dumps({k: v for k, v in q.as_dict().items() if k in ('ha', 'hb', 'ht', 'os', 'us', 'md')})})")
     if trace_out:
-        ex.trace.save(trace_out)
+        try:
+            ex.trace.save(trace_out)
+        except OSError as exc:
+            raise InvalidConfig("--trace", trace_out, f"cannot write there ({exc.strerror or exc})") from None
         click.echo(f"  trace saved to {trace_out}")
     sys.exit(EXIT_FOUND if ex.misbehaviors else EXIT_CLEAN)
+
+
+def _check_runnable(sc, source: str) -> None:
+    """What SUMO refuses at run time but a well-formed scenario may hold (see validate.check_departure)."""
+    from drivefuzz.scenario.roadmap import load_roadmap
+    from drivefuzz.scenario.validate import check_departure
+
+    check_departure(sc, load_roadmap(sc.network_path()), source)
+
+
+def _manifest_of(scenario: str | Path) -> str:
+    """The file a scenario's fields come from: its scenario.json (or the JSON file itself)."""
+    p = Path(scenario)
+    return str(p / "scenario.json") if p.is_dir() else str(p)
 
 
 # ---------------------------------------------------------------------------- seed
 @main.command()
 @click.argument("network", type=click.Path())
-@click.option("-n", "count", default=8, show_default=True, help="How many seeds.")
+@click.option("-n", "count", default=8, show_default=True, type=click.IntRange(1, 1000), help="How many seeds.")
 @click.option("-o", "out", type=click.Path(file_okay=False), help="Output folder (default seeds/<network>/).")
-@click.option("--seed", "rng_seed", default=0, show_default=True, help="RNG seed.")
+@click.option("--seed", "rng_seed", default=0, show_default=True, type=click.IntRange(min=0), help="RNG seed.")
 @click.option("--no-verify", is_flag=True, help="Skip the dry run of the reference ADS.")
+@click.option("--force", is_flag=True, help="Write into an output folder that is not empty (replacing 000, 001...).")
 @handle_errors
-def seed(network, count, out, rng_seed, no_verify):
+def seed(network, count, out, rng_seed, no_verify, force):
     """Write COUNT seed missions for NETWORK, each verified by a dry run of the reference ADS."""
-    from drivefuzz.scenario.roadmap import load_roadmap
     from drivefuzz.scenario.seed import generate_seeds
     from drivefuzz.scenario.sumofiles import write_scenario
+    from drivefuzz.scenario.validate import load_network
     from drivefuzz.sim.verify import dry_run
 
-    rmap = load_roadmap(network)
+    rmap = load_network(network)
     out = Path(out or Path("seeds") / rmap.name)
+    if out.exists() and not out.is_dir():
+        raise InvalidConfig("-o", str(out), "is a file", "a new or empty folder")
+    if out.is_dir() and any(out.iterdir()) and not force:
+        raise InvalidConfig("-o", str(out), "folder is not empty (its seeds would be overwritten)",
+                            "a new or empty folder, or --force to replace them")
+    _writable_dir(out, "-o")
     seeds = generate_seeds(network, count, rng_seed, verify=None if no_verify else dry_run,
                            log=lambda s: click.echo(f"  {s}", err=True))
     if not seeds:
@@ -191,11 +275,11 @@ def _progress_printer():
 @click.option("--resume", "resume_dir", type=click.Path(file_okay=False), help="Continue the campaign in this directory.")
 @click.option("--strategy", type=click.Choice(["all", "congestion", "entropy", "instability", "maneuver", "mix"]),
               default=None, help="Mutation strategy [all].")
-@click.option("--cycles", type=int, default=None, help="Cycles of one lineage at most [10].")
-@click.option("--population", type=int, default=None, help="Mutants per cycle [8].")
+@click.option("--cycles", type=click.IntRange(min=1), default=None, help="Cycles of one lineage at most [10].")
+@click.option("--population", type=click.IntRange(min=1), default=None, help="Mutants per cycle [8].")
 @click.option("--budget", default=None, help="Wall-clock budget of this run, e.g. 90s, 10m, 2h.")
-@click.option("--max-execs", type=int, default=None, help="Stop after N executions (per run: a resume runs N more).")
-@click.option("--seed", "rng_seed", type=int, default=None, help="Campaign RNG seed [0].")
+@click.option("--max-execs", type=click.IntRange(min=1), default=None, help="Stop after N executions (per run: a resume runs N more).")
+@click.option("--seed", "rng_seed", type=click.IntRange(min=0), default=None, help="Campaign RNG seed [0].")
 @click.option("--seeds", "seeds_dir", type=click.Path(file_okay=False), help="Seed folder (default seeds/<network>/).")
 @click.option("--ads", "ads_name", default=None, help="ADS plugin under test [ego].")
 @click.option("--ads-option", multiple=True, metavar="K=V", help="ADS option, e.g. fault=speeding.")
@@ -205,11 +289,11 @@ def _progress_printer():
 @click.option("--single-pass", is_flag=True, help="One lineage per seed, then stop (the default without a budget).")
 @click.option("--report-all", is_flag=True, help="Count incidents (not the ego's fault) as findings too.")
 @click.option("--continue-after-finding", is_flag=True, help="Keep fuzzing a seed after a finding.")
-@click.option("--time-limit", type=float, default=None, help="Simulated seconds per execution (default: the seed's).")
-@click.option("--jobs", "-j", type=int, default=None, help="Seed campaigns at once on a local Dask cluster [1].")
+@click.option("--time-limit", type=_Seconds(), default=None, help="Simulated seconds per execution (default: the seed's).")
+@click.option("--jobs", "-j", type=click.IntRange(1, JOBS_PER_CPU * (os.cpu_count() or 1)), default=None, help="Seed campaigns at once on a local Dask cluster [1].")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Run the jobs on an existing Dask scheduler (tcp://HOST:PORT or a scheduler.json).")
-@click.option("--exec-timeout", type=float, default=None, help="Wall seconds before an execution is a 'hang' [300].")
+@click.option("--exec-timeout", type=_Seconds(), default=None, help="Wall seconds before an execution is a 'hang' [300].")
 @click.option("--no-isolation", is_flag=True, help="Run executions in this process (no crash isolation; for debugging).")
 @oracle_options
 @handle_errors
@@ -217,14 +301,17 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
          ads_option, feedback, no_feedback, single_pass, report_all, continue_after_finding, time_limit, jobs, scheduler, exec_timeout, no_isolation,
          oracle_kv, no_oracle, config_file):
     """Fuzz the ADS on NETWORK (a .net.xml). Exit 0: nothing found; 1: misbehaviour found; 2: bad input."""
-    from drivefuzz.campaign.fuzz import Campaign, FuzzConfig, load_campaign, parse_duration
-    from drivefuzz.search.mutate import MutationConfig
-    from drivefuzz.search.quality import QualityConfig
-    from drivefuzz.scenario import AdsSpec
+    from drivefuzz.ads import check_trusted
+    from drivefuzz.campaign.fuzz import Campaign, load_campaign, parse_duration
 
     argv = ["drivefuzz", *sys.argv[1:]]
     if resume_dir:
         seeds, cfg, argv = load_campaign(resume_dir)
+        manifest = str(Path(resume_dir) / "manifest.json")
+        if ads_name is not None and ads_name != cfg.ads.name:
+            raise InvalidConfig("--ads", ads_name, f"the campaign in {resume_dir} fuzzes {cfg.ads.name!r}",
+                                f"--ads {cfg.ads.name} (to trust it), or a new campaign")
+        check_trusted(cfg.ads.name, manifest, "config.ads.name", command_line=ads_name)
         out_dir = Path(resume_dir)
         if budget is not None:
             cfg.budget_s = parse_duration(budget)
@@ -233,53 +320,30 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
     else:
         if not network:
             raise InvalidConfig("fuzz", "NETWORK", "missing", "a .net.xml file, or --resume OUT")
-        from drivefuzz.scenario.roadmap import load_roadmap
+        from drivefuzz.scenario.validate import load_network
 
-        load_roadmap(network)  # a bad network is the first thing to report
+        load_network(network)  # a bad network is the first thing to report
         config = load_config_file(config_file)
-        fz = dict(config.get("fuzz", {}))
-        ads_cfg = dict(config.get("ads", {}))
-        ads_opts = dict(ads_cfg.get("options", {}))
-        ads_opts.update(parse_kv(ads_option, "--ads-option"))
-        try:
-            cfg = FuzzConfig(
-                cycles=cycles or fz.get("cycles", 10), population=population or fz.get("population", 8),
-                strategy=strategy or fz.get("strategy", "all"),
-                seed=rng_seed if rng_seed is not None else fz.get("seed", 0),
-                budget_s=parse_duration(budget or fz.get("budget")), max_execs=max_execs or fz.get("max_execs"),
-                feedback="random" if (no_feedback or fz.get("no_feedback", False)) else (
-                    feedback or fz.get("feedback", "risk")),
-                single_pass=single_pass or fz.get("single_pass", False),
-                continue_after_finding=continue_after_finding or fz.get("continue_after_finding", False),
-                ads=AdsSpec(name=ads_name or ads_cfg.get("name", "ego"), options=ads_opts),
-                oracles=_oracle_settings(config, oracle_kv, no_oracle),
-                mutation=MutationConfig.model_validate(config.get("mutation", {})),
-                quality=QualityConfig.model_validate(config.get("quality", {})),
-                time_limit=time_limit or fz.get("time_limit"),
-                isolate=not (no_isolation or fz.get("no_isolation", False)),
-                exec_timeout_s=exec_timeout or fz.get("exec_timeout", 300.0),
-            )
-        except ValueError as exc:  # pydantic
-            raise InvalidConfig(config_file or "options", None, str(exc).splitlines()[0]) from None
-        if cfg.cycles < 1 or cfg.population < 1:
-            raise InvalidConfig("--cycles/--population", None, "must be at least 1", "a positive integer")
-        if cfg.exec_timeout_s <= 0:
-            raise InvalidConfig("--exec-timeout", str(cfg.exec_timeout_s), "must be positive", "seconds, e.g. 300")
+        cfg = _fuzz_config(config, config_file, dict(
+            cycles=cycles, population=population, strategy=strategy, seed=rng_seed, budget=budget,
+            max_execs=max_execs, feedback=feedback, no_feedback=no_feedback, single_pass=single_pass,
+            continue_after_finding=continue_after_finding, time_limit=time_limit, no_isolation=no_isolation,
+            exec_timeout=exec_timeout), ads_name, ads_option, oracle_kv, no_oracle)
         from drivefuzz.ads import load_ads
 
         load_ads(cfg.ads.name, cfg.ads.options)  # fail now on an unknown ADS or option
-        seeds = _seeds_for(network, seeds_dir)
         out_dir = Path(out) if out else Path("drivefuzz-out") / time.strftime(f"{Path(network).name.split('.')[0]}-%Y%m%d-%H%M%S")
-        if out_dir.exists() and any(out_dir.iterdir()):
+        if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
             raise InvalidConfig("-o", str(out_dir), "output directory exists and is not empty",
                                 "a new directory, or --resume to continue it")
-    if jobs is not None and jobs < 1:
-        raise InvalidConfig("--jobs", str(jobs), "must be at least 1", "a positive integer")
     from drivefuzz.campaign.cluster import BATCH_SYSTEMS
 
     if scheduler in BATCH_SYSTEMS:
         raise InvalidConfig("--scheduler", scheduler, "batch systems are run by 'drivefuzz campaign'",
                             "tcp://HOST:PORT or a scheduler.json here; where = \"slurm\" in a campaign file")
+    _writable_dir(out_dir, "-o")
+    if not resume_dir:
+        seeds = _seeds_for(network, seeds_dir)
     campaign = Campaign(out_dir, seeds, cfg, argv, on_progress=_progress_printer())
     where = scheduler or ("local" if (jobs or 1) > 1 else None)
     try:
@@ -291,6 +355,44 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
         sys.exit(EXIT_ABORTED)
     _print_summary(campaign, findings, out_dir, report_all)
     sys.exit(_exit_code(findings + (campaign.incidents if report_all else []), bool(campaign.failed_jobs)))
+
+
+def _fuzz_config(config: dict[str, Any], config_file: str | None, cli: dict[str, Any], ads_name, ads_option,
+                 oracle_kv, no_oracle):
+    """The campaign's FuzzConfig: the command line's options over the config file's ``[fuzz]``, over defaults."""
+    from drivefuzz.campaign.fuzz import FuzzConfig, parse_duration
+    from drivefuzz.search.mutate import MutationConfig
+    from drivefuzz.search.quality import QualityConfig
+    from drivefuzz.scenario import AdsSpec
+
+    fz = config.get("fuzz", {})
+
+    def pick(key, default=None):
+        value = cli.get(key)
+        return value if value is not None and value is not False else fz.get(key, default)
+
+    ads_cfg = config.get("ads", {})
+    ads_opts = dict(ads_cfg.get("options", {}))
+    ads_opts.update(parse_kv(ads_option, "--ads-option"))
+    try:
+        ads = AdsSpec(name=ads_name or ads_cfg.get("name", "ego"), options=ads_opts)
+    except ValueError as exc:  # pydantic: an option value that is not a bool, number or string
+        raise InvalidConfig("--ads-option", None, str(exc).splitlines()[-1].strip()) from None
+    budget = cli["budget"]
+    return FuzzConfig(
+        cycles=pick("cycles", 10), population=pick("population", 8), strategy=pick("strategy", "all"),
+        seed=pick("seed", 0),
+        budget_s=parse_duration(budget) if budget is not None else parse_duration(fz.get("budget")),
+        max_execs=pick("max_execs"),
+        feedback="random" if pick("no_feedback", False) else pick("feedback", "risk"),
+        single_pass=pick("single_pass", False),
+        continue_after_finding=pick("continue_after_finding", False), ads=ads,
+        oracles=_oracle_settings(config, oracle_kv, no_oracle, source=config_file),
+        mutation=MutationConfig.model_validate(config.get("mutation", {})),
+        quality=QualityConfig.model_validate(config.get("quality", {})),
+        time_limit=pick("time_limit"), isolate=not pick("no_isolation", False),
+        exec_timeout_s=pick("exec_timeout", 300.0),
+    )
 
 
 def _exit_code(findings, failed_jobs: bool) -> int:
@@ -372,13 +474,22 @@ def _print_findings(title: str, findings) -> None:
 
 
 def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
-    from drivefuzz.scenario.roadmap import load_roadmap
+    """The seeds in ``seeds_dir`` (default ``seeds/<network>/``), or ``count`` new ones.
+
+    New seeds are written into that folder only when it is new or empty: a folder
+    that holds something else is never written into (the campaign keeps its seeds
+    in its own output directory anyway). A ``--seeds`` folder with something else
+    in it is a mistake in the command line.
+    """
     from drivefuzz.scenario.seed import generate_seeds, list_seeds
     from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
+    from drivefuzz.scenario.validate import load_network
     from drivefuzz.sim.verify import dry_run
 
-    rmap = load_roadmap(network)
+    rmap = load_network(network)
     folder = Path(seeds_dir) if seeds_dir else Path("seeds") / rmap.name
+    if folder.exists() and not folder.is_dir():
+        raise InvalidConfig("--seeds", str(folder), "is a file", "a folder of seed scenarios (000/, 001/...)")
     found = list_seeds(folder) if folder.is_dir() else []
     if found:
         seeds = []
@@ -386,15 +497,27 @@ def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
             sc = load_scenario(p)
             if Path(sc.network).resolve() != Path(network).resolve():
                 sc = sc.model_copy(update={"network": str(Path(network).resolve())})
+            _check_runnable(sc, str(p / "scenario.json"))
             seeds.append(sc)
         return seeds
+    other = folder.is_dir() and any(folder.iterdir())
+    if other and seeds_dir:
+        raise InvalidConfig("--seeds", str(folder), "holds no seeds (no NNN/scenario.json) but is not empty",
+                            "a folder of seeds, or a new or empty folder to generate them into")
     click.echo(f"no seeds in {folder}: generating and verifying {count} for {rmap.path.name}...", err=True)
     seeds = generate_seeds(network, count, 0, verify=dry_run)
     if not seeds:
         raise InvalidConfig(network, None, "could not generate a seed mission that the reference ADS completes",
                             "a network with connected passenger roads")
-    for i, sc in enumerate(seeds):
-        write_scenario(sc, folder / f"{i:03d}")
+    if other:  # not ours to write into: the campaign keeps them in its output directory
+        click.echo(f"{folder} is not empty: the seeds are kept in the output directory only", err=True)
+        return seeds
+    try:
+        for i, sc in enumerate(seeds):
+            write_scenario(sc, folder / f"{i:03d}")
+    except OSError as exc:
+        click.echo(f"cannot write the seeds into {folder} ({exc.strerror or exc}): the output directory "
+                   "keeps them", err=True)
     return seeds
 
 
@@ -403,8 +526,10 @@ def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
 @click.argument("campaign_file", type=click.Path(), required=False)
 @click.option("-o", "out", type=click.Path(file_okay=False), help="Output directory (default: new under ./drivefuzz-out/).")
 @click.option("--resume", "resume_dir", type=click.Path(file_okay=False), help="Continue the batch in this directory.")
+@click.option("--ads", "trusted_ads", multiple=True, metavar="NAME",
+              help="With --resume: an ADS of the batch's campaign.json that is not installed, to import it anyway.")
 @handle_errors
-def campaign(campaign_file, out, resume_dir):
+def campaign(campaign_file, out, resume_dir, trusted_ads):
     """Run a batch: every cell of CAMPAIGN_FILE's matrix (networks x strategies x ADS x seeds) on Dask."""
     from drivefuzz.campaign.batch import CampaignFile, cells, load_campaign_file, results_table, write_results
     from drivefuzz.campaign.config import FINISHED
@@ -421,8 +546,13 @@ def campaign(campaign_file, out, resume_dir):
                                 "a directory written by 'drivefuzz campaign'")
         try:
             spec = CampaignFile.model_validate_json(path.read_text())
-        except ValueError as exc:
+        except (ValueError, RecursionError, UnicodeDecodeError) as exc:
             raise InvalidConfig(str(path), None, f"unreadable ({str(exc).splitlines()[0]})") from None
+        from drivefuzz.ads import check_trusted
+
+        for i, ads in enumerate(spec.matrix.ads):  # the folder may come from anyone: import only what is trusted
+            check_trusted(ads.name, str(path), f"matrix.ads[{i}].name",
+                          command_line=ads.name if ads.name in trusted_ads else None)
     else:
         if not campaign_file:
             raise InvalidConfig("campaign", "CAMPAIGN_FILE", "missing", "a TOML file, or --resume DIR")
@@ -432,12 +562,12 @@ def campaign(campaign_file, out, resume_dir):
 
             check_submit_command(spec.run.where)
         settings = OracleSettings(settings=spec.oracles)
-        settings.instantiate()  # unknown oracles or settings fail now, with the file's name
+        settings.instantiate(source=campaign_file)  # unknown oracles or settings fail now, with the file's name
         out_dir = Path(out) if out else Path("drivefuzz-out") / time.strftime("campaign-%Y%m%d-%H%M%S")
-        if out_dir.exists() and any(out_dir.iterdir()):
+        if out_dir.exists() and (not out_dir.is_dir() or any(out_dir.iterdir())):
             raise InvalidConfig("-o", str(out_dir), "output directory exists and is not empty",
                                 "a new directory, or --resume to continue it")
-        out_dir.mkdir(parents=True, exist_ok=True)
+        _writable_dir(out_dir, "-o")
         atomic_write_json(out_dir / "campaign.json", spec.model_dump(mode="json"))
     c = spec.campaign
     budget_s = parse_duration(c.budget)
@@ -513,11 +643,14 @@ def _batch_progress(campaigns):
 @main.command()
 @click.argument("finding", type=click.Path())
 @click.option("--gui", is_flag=True, help="Show the run in sumo-gui.")
+@click.option("--ads", "ads_name", default=None, metavar="NAME",
+              help="The finding's ADS when it is not an installed plugin (package.module:Class): import it anyway.")
 @handle_errors
-def replay(finding, gui):
+def replay(finding, gui, ads_name):
     """Run a FINDING directory again; 'reproduced' only if the same oracle fires at the same frame."""
+    from drivefuzz.ads import check_trusted
     from drivefuzz.sim.execute import execute
-    from drivefuzz.oracle import Misbehavior, OracleSettings
+    from drivefuzz.oracle import OracleSettings
     from drivefuzz.sim.simhost import FAILURE_KINDS
     from drivefuzz.scenario.sumofiles import read_scenario
 
@@ -525,25 +658,26 @@ def replay(finding, gui):
     vpath = folder / "verdict.json"
     if not vpath.is_file():
         raise InvalidConfig(finding, None, "not a finding directory (no verdict.json)", "findings/<n>-<oracle>-<hash>/")
-    try:
-        verdict = json.loads(vpath.read_text())
-        want = Misbehavior.from_dict(verdict["misbehaviors"][0])
-    except (ValueError, KeyError, IndexError, TypeError) as exc:
-        raise InvalidConfig(str(vpath), None, f"unreadable verdict ({type(exc).__name__})",
-                            "a verdict.json written by drivefuzz fuzz") from None
+    verdict, want = _read_verdict(vpath)
     sc = read_scenario(folder)
+    _check_runnable(sc, str(folder / "scenario.json"))
+    if ads_name is not None and ads_name != sc.ads.name:
+        raise InvalidConfig("--ads", ads_name, f"the finding was made with {sc.ads.name!r}",
+                            f"--ads {sc.ads.name} (to trust it)")
+    check_trusted(sc.ads.name, str(folder / "scenario.json"), "ads.name", command_line=ads_name)
+    oracles = OracleSettings(settings=verdict["oracles"]).instantiate(source=str(vpath))
     if want.oracle in FAILURE_KINDS:  # a crash, hang or plugin error: run it isolated again
         from drivefuzz.sim.simhost import SimHost
 
-        with SimHost(timeout_s=verdict.get("exec_timeout_s", 300.0)) as host:
-            out = host.execute(sc, verdict.get("oracles", {}))
+        with SimHost(timeout_s=verdict["exec_timeout_s"]) as host:
+            out = host.execute(sc, verdict["oracles"])
         if out.status == want.oracle and (out.error_type or out.status) == want.kind:
             click.echo(f"reproduced: {out.status} ({out.detail})")
             sys.exit(EXIT_CLEAN)
         got = f"{out.status} ({out.detail})" if out.status != "ok" else "a normal execution"
         click.echo(f"NOT reproduced: expected {want.oracle}/{want.kind}, got {got}")
         sys.exit(EXIT_FOUND)
-    ex = execute(sc, oracles=OracleSettings(settings=verdict.get("oracles", {})).instantiate(), gui=gui)
+    ex = execute(sc, oracles=oracles, gui=gui)
     got = ex.misbehaviors[0] if ex.misbehaviors else None
     if got is not None and got.oracle == want.oracle and got.kind == want.kind and got.frame == want.frame:
         click.echo(f"reproduced: {got.oracle}/{got.kind} at frame {got.frame} (t={got.time:.2f} s)")
@@ -551,6 +685,36 @@ def replay(finding, gui):
     seen = f"{got.oracle}/{got.kind} at frame {got.frame}" if got else f"no misbehaviour ({ex.termination.value})"
     click.echo(f"NOT reproduced: expected {want.oracle}/{want.kind} at frame {want.frame}, got {seen}")
     sys.exit(EXIT_FOUND)
+
+
+def _read_verdict(path: Path):
+    """A finding's verdict.json, checked: (the verdict, its first Misbehavior)."""
+    import math
+
+    from drivefuzz.oracle import Misbehavior
+
+    valid = "a verdict.json written by drivefuzz fuzz"
+    try:
+        verdict = json.loads(path.read_text())
+    except (ValueError, RecursionError) as exc:
+        raise InvalidConfig(str(path), None, f"unreadable verdict ({type(exc).__name__})", valid) from None
+    if not isinstance(verdict, dict):
+        raise InvalidConfig(str(path), None, "not a JSON object", valid)
+    try:
+        want = Misbehavior.from_dict(verdict["misbehaviors"][0])
+        if not all(isinstance(x, str) for x in (want.oracle, want.kind)):
+            raise TypeError("oracle and kind must be strings")
+    except (ValueError, KeyError, IndexError, TypeError, AttributeError) as exc:
+        raise InvalidConfig(str(path), "misbehaviors[0]", f"unreadable ({type(exc).__name__}: {exc})", valid) from None
+    timeout = verdict.setdefault("exec_timeout_s", 300.0)
+    if (not isinstance(timeout, (int, float)) or isinstance(timeout, bool) or not math.isfinite(timeout)
+            or not 0 < timeout <= MAX_SECONDS):
+        raise InvalidConfig(str(path), "exec_timeout_s", f"{timeout!r} is not a number of seconds",
+                            f"a number in (0, {MAX_SECONDS:g}]")
+    oracles = verdict.setdefault("oracles", {})
+    if not isinstance(oracles, dict) or not all(isinstance(v, dict) for v in oracles.values()):
+        raise InvalidConfig(str(path), "oracles", "not a table of oracle settings", 'e.g. {"speeding": {...}}')
+    return verdict, want
 
 
 # ------------------------------------------------------------------------- oracles

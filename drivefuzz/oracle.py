@@ -160,12 +160,18 @@ class Oracle(abc.ABC):
 
 
 def make_config(cls: type[Oracle], values: Mapping[str, Any], source: str = "--oracle") -> BaseModel:
+    keys = ", ".join(cls.Config.model_fields)
+    if not isinstance(values, Mapping):
+        raise InvalidConfig(source, cls.name, f"settings must be a table of KEY = VALUE, not {values!r}",
+                            f"settings: {keys}")
+    for key, value in values.items():
+        if isinstance(value, float) and value != value:
+            raise InvalidConfig(source, f"{cls.name}.{key}", "nan is not a setting", "a number")
     try:
         return cls.Config.model_validate(dict(values))
     except ValidationError as exc:
         err = exc.errors()[0]
         loc = ".".join(str(p) for p in err["loc"])
-        keys = ", ".join(cls.Config.model_fields)
         raise InvalidConfig(source, f"{cls.name}.{loc}", err["msg"], f"settings: {keys}") from None
 
 
@@ -189,14 +195,15 @@ class OracleSettings(BaseModel):
     model_config = ConfigDict(extra="forbid")
     settings: dict[str, dict[str, Any]] = {}
 
-    def instantiate(self) -> list[Oracle]:
+    def instantiate(self, source: str = "--oracle") -> list[Oracle]:
+        """One configured instance of every enabled oracle; ``source`` names where bad settings came from."""
         classes = available_oracles()
         unknown = set(self.settings) - set(classes)
         if unknown:
-            raise InvalidConfig("--oracle", None, f"unknown oracle(s) {sorted(unknown)}", ", ".join(classes))
+            raise InvalidConfig(source, None, f"unknown oracle(s) {sorted(unknown)}", ", ".join(classes))
         out = []
         for name, cls in classes.items():
-            cfg = make_config(cls, self.settings.get(name, {}))
+            cfg = make_config(cls, self.settings.get(name, {}), source)
             if cfg.enabled:
                 out.append(cls(cfg))
         return out

@@ -135,7 +135,7 @@ def test_unusable_scheduler(tmp_path):
     bad_json.write_text("{not json")
     cases = (("foo:bar", "cannot reach"), ("udp://127.0.0.1:1", "cannot reach"), (str(bad_json), "cannot reach"),
              (str(tmp_path / "none.json"), "no such scheduler file"), ("slurm", "drivefuzz campaign"),
-             ("nowhere", "not a scheduler address"))
+             ("nowhere", "not a scheduler address"), ("ucx://127.0.0.1:1", "cannot reach"))
     env = dict(os.environ, PYTHONPATH=str(ROOT))
     procs = [subprocess.Popen([sys.executable, "-m", "drivefuzz.cli", "fuzz", str(TOWN), "--scheduler", where,
                                "--max-execs", "1", "-o", str(tmp_path / f"o{i}")],
@@ -144,3 +144,9 @@ def test_unusable_scheduler(tmp_path):
     for p, (where, needle) in zip(procs, cases):
         out, err = p.communicate(timeout=120)
         _one_line_error(p.returncode, out + err, None, "--scheduler", needle)
+
+
+def test_campaign_file_oracle_settings_are_named_as_the_files(tmp_path):
+    camp = tmp_path / "camp.toml"
+    camp.write_text(f'[matrix]\nnetworks = ["{TOWN}"]\n[oracles.speeding]\ntolerance = "x"\n')
+    _one_line_error(*_invoke(["campaign", str(camp), "-o", str(tmp_path / "o")]), "camp.toml", "speeding.tolerance")

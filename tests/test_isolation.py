@@ -107,7 +107,9 @@ def test_campaign_records_crash_findings_and_goes_on(tmp_path, town_scenario):
     f = findings[0].path
     verdict = json.loads((f / "verdict.json").read_text())
     assert verdict["error"]["type"] == "SIGABRT" and (f / "routes.rou.xml").exists() and (f / "replay.sh").exists()
-    result = CliRunner().invoke(main, ["replay", str(f)])
+    result = CliRunner().invoke(main, ["replay", str(f)])  # an ADS that is not installed: not imported
+    assert result.exit_code == 2 and f"--ads {FAILING} to trust it" in result.output, result.output
+    result = CliRunner().invoke(main, ["replay", str(f), "--ads", FAILING])
     assert result.exit_code == 0 and "reproduced: simulator-crash" in result.output, result.output
 
 
@@ -122,3 +124,30 @@ def test_cli_campaign_with_exec_timeout(tmp_path, town_scenario, failure, kind):
         assert result.exit_code == 0 and "0 finding(s)" in result.output, result.output
     else:
         assert result.exit_code == 1 and f"{kind}/timeout" in result.output, result.output
+
+
+def test_the_host_does_not_import_from_the_current_folder(tmp_path, town_scenario, monkeypatch):
+    """A shapely.py where drivefuzz starts (a downloaded finding's folder) must not run in the host."""
+    marker = tmp_path / "marker"
+    (tmp_path / "shapely.py").write_text(f"open({str(marker)!r}, 'w').write('ran')\n")
+    monkeypatch.chdir(tmp_path)
+    with SimHost(timeout_s=60) as host:
+        out = host.execute(town_scenario.model_copy(update={"sim": SimOptions(time_limit=1.0)}))
+    assert out.status == OK, out
+    assert not marker.exists()
+
+
+def test_a_crashed_host_leaves_no_temporary_folder(town_scenario):
+    import glob
+    import tempfile
+
+    def leftovers():
+        return set(glob.glob(os.path.join(tempfile.gettempdir(), "drivefuzz-host-*")))
+
+    before = leftovers()
+    with SimHost(timeout_s=60) as host:
+        out = host.execute(_with_ads(town_scenario, failure="abort", at=0.5))
+        assert out.status == CRASH
+        assert host._tmp is None  # removed with the dead child
+        mine = leftovers() - before
+    assert not mine

@@ -105,6 +105,8 @@ def load_campaign_file(path: str | Path) -> CampaignFile:
         data = tomllib.loads(path.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InvalidConfig(str(path), None, f"cannot parse ({exc})", "valid TOML") from None
+    except RecursionError:
+        raise InvalidConfig(str(path), None, "cannot parse (nested too deeply)", "valid TOML") from None
     try:
         spec = CampaignFile.model_validate(data)
     except ValidationError as exc:
@@ -167,9 +169,12 @@ def results_table(out: Path, spec: CampaignFile) -> list[dict[str, Any]]:
                                "execs": 0, "findings": 0, "distinct": 0, "incidents": 0, "by_oracle": "",
                                "status": "not started"}
         if (d / "index.sqlite").exists():
-            db = sqlite3.connect(d / "index.sqlite")
-            row["execs"] = db.execute("SELECT COUNT(*) FROM executions").fetchone()[0]
-            db.close()
+            try:
+                db = sqlite3.connect(d / "index.sqlite")
+                row["execs"] = db.execute("SELECT COUNT(*) FROM executions").fetchone()[0]
+                db.close()
+            except sqlite3.DatabaseError:  # rebuilt from the journals when the cell runs again
+                row["execs"] = "?"
             from drivefuzz.campaign.fuzz import load_finding
 
             found = [load_finding(f) for f in sorted((d / "findings").iterdir())

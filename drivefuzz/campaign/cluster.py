@@ -128,9 +128,10 @@ def _connect(where: str):
                             "local, tcp://HOST:PORT, a scheduler.json, or " + "/".join(BATCH_SYSTEMS))
     try:
         return Client(scheduler_file=where, timeout="20s") if is_file else Client(where, timeout="20s")
-    except (OSError, TimeoutError, ValueError, AssertionError, KeyError) as exc:
+    except (OSError, TimeoutError, ValueError, AssertionError, KeyError, TypeError, ImportError,
+            RecursionError) as exc:
         # OSError/TimeoutError: nobody listens; ValueError: a malformed address; AssertionError/KeyError:
-        # a scheduler file that is not one
+        # a scheduler file that is not one; TypeError/ImportError: a protocol (ucx://) this install lacks
         problem = f"cannot reach the Dask scheduler ({type(exc).__name__}: {exc})"
     # the half-built Client must be collected now: collected later, inside another Client's start-up,
     # its __del__ deadlocks on distributed's loop-runner lock

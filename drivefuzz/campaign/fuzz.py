@@ -169,8 +169,7 @@ class Campaign:
             manifest["run"] = manifest.get("run", 1) + 1
             atomic_write_json(self.out / "manifest.json", manifest)
         (self.out / STOP_FILE).unlink(missing_ok=True)
-        self.db = sqlite3.connect(self.out / "index.sqlite")
-        self.db.executescript("DROP TABLE IF EXISTS executions;" + SCHEMA)  # derived data: rebuilt from journals
+        self.db = open_index(self.out / "index.sqlite")  # derived data: rebuilt from the journals
         self._offsets = {}
         self.findings, self.incidents, self.progress.execs, self.progress.findings = [], [], 0, 0
         self.poll(quiet=True)
@@ -196,10 +195,10 @@ class Campaign:
             for line in data[:end].splitlines():
                 try:
                     rec = json.loads(line)
-                except json.JSONDecodeError:  # torn by a kill, then appended after
+                except (ValueError, RecursionError):  # torn by a kill, then appended after
                     continue
-                if rec.get("event") == "end":
-                    self._index(rec)
+                if journal_problem(rec) is None and rec.get("event") == "end":
+                    self._index(self._checked_finding(rec))
                     new += 1
         if new:
             self.db.commit()
@@ -227,6 +226,21 @@ class Campaign:
                 elif (path / "verdict.json").is_file():
                     kept.append(load_finding(path))
         p.findings, p.incidents = len(self.findings), len(self.incidents)
+
+    def _checked_finding(self, rec: dict[str, Any]) -> dict[str, Any]:
+        """``rec``, less a finding or incident whose verdict is unreadable (its folder stays where it is:
+        nothing is deleted, it is only left out of the index's list)."""
+        for col in ("finding", "incident"):
+            folder = rec.get(col)
+            if not folder:
+                continue
+            path = self.out / folder
+            try:
+                if path.is_dir():
+                    load_finding(path)
+            except (OSError, ValueError, KeyError, IndexError, TypeError, AttributeError, RecursionError):
+                rec = dict(rec, **{col: None})
+        return rec
 
     # ------------------------------------------------------------------ budget
     def out_of_budget(self) -> bool:
@@ -367,21 +381,124 @@ def run_on_dask(client, work: list[tuple[Campaign, list[int]]], max_running: int
         raise
 
 
+def open_index(path: Path) -> sqlite3.Connection:
+    """The campaign's index, emptied for a rebuild from the journals.
+
+    The index is derived data: one that SQLite cannot read (a torn or foreign file)
+    is deleted and made anew; something else at its path (a folder) is moved aside
+    to ``index.sqlite.broken``.
+    """
+    for attempt in range(2):
+        db = None
+        try:
+            if path.is_dir():
+                raise sqlite3.DatabaseError("a folder, not a database")
+            db = sqlite3.connect(path)
+            db.executescript("DROP TABLE IF EXISTS executions;" + SCHEMA)
+            return db
+        except sqlite3.DatabaseError as exc:
+            if db is not None:
+                db.close()
+            if attempt:
+                raise InvalidConfig(str(path), None, f"cannot rebuild the index ({exc})",
+                                    "a campaign folder you may write") from None
+            _discard_index(path)
+    raise AssertionError("unreachable")
+
+
+def _discard_index(path: Path) -> None:
+    import shutil
+
+    if path.is_dir():
+        aside = path.with_name(path.name + ".broken")
+        if aside.is_dir():
+            shutil.rmtree(aside, ignore_errors=True)
+        else:
+            aside.unlink(missing_ok=True)
+        os.replace(path, aside)
+    else:
+        path.unlink(missing_ok=True)
+    for suffix in ("-journal", "-wal", "-shm"):
+        path.with_name(path.name + suffix).unlink(missing_ok=True)
+
+
+#: what every journal record of an execution's end must carry, and of which type
+_END_KEYS = {"key": str, "seed_index": int, "cycle": int, "hash": str}
+
+
+def journal_problem(rec: Any) -> str | None:
+    """Why a journal record cannot be used (None when it can)."""
+    if not isinstance(rec, dict) or not isinstance(rec.get("event"), str):
+        return "not a JSON object with an event"
+    if rec["event"] == "start" and not isinstance(rec.get("key"), str):
+        return "a start record without its key"
+    if rec["event"] != "end":
+        return None
+    for key, typ in _END_KEYS.items():
+        if not isinstance(rec.get(key), typ) or isinstance(rec.get(key), bool):
+            return f"an end record whose {key!r} is missing or not a {typ.__name__}"
+    for col in ("finding", "incident"):
+        folder = rec.get(col)
+        if folder is not None and (not isinstance(folder, str) or Path(folder).is_absolute()
+                                   or ".." in Path(folder).parts):
+            return f"an end record whose {col} is not a folder of the campaign"
+    for _, key in COLUMNS:
+        if key not in ("components", "timings") and not isinstance(rec.get(key), (str, int, float, type(None))):
+            return f"an end record whose {key!r} is not a plain value"
+    return None
+
+
+def check_journals(out: Path, n_seeds: int) -> None:
+    """Raise InvalidConfig naming the journal and line that a resumed job could not read."""
+    for si in range(n_seeds):
+        path = job_dir(out, si) / "journal.jsonl"
+        if not path.is_file():
+            continue
+        try:
+            text = path.read_bytes().decode("utf-8")
+        except UnicodeDecodeError:
+            raise InvalidConfig(str(path), None, "not a text file", "the journal a seed job wrote") from None
+        except OSError as exc:
+            raise InvalidConfig(str(path), None, f"cannot read ({exc.strerror})") from None
+        for n, line in enumerate(text.splitlines(), 1):
+            try:
+                rec = json.loads(line)
+            except (ValueError, RecursionError):
+                continue  # a line torn by a kill: the job skips it
+            problem = journal_problem(rec)
+            if problem is not None:
+                raise InvalidConfig(str(path), f"line {n}", problem, "the journal a seed job wrote") from None
+
+
 def load_campaign(out: str | os.PathLike) -> tuple[list[Scenario], FuzzConfig, list[str]]:
-    """Seeds, configuration and command line of an existing output directory (for --resume)."""
+    """Seeds, configuration and command line of an existing output directory (for --resume).
+
+    Everything is checked here, so that a damaged (or hostile) manifest or journal is
+    one error naming the file, not a failure in the middle of a seed job.
+    """
+    from pydantic import ValidationError
+
+    from drivefuzz.campaign.configfile import ManifestFile, pydantic_error, read_data_file
+
     out = Path(out)
     path = out / "manifest.json"
     if not path.is_file():
         raise InvalidConfig(str(out), None, "not a drivefuzz output directory (no manifest.json)",
                             "a directory written by 'drivefuzz fuzz -o'")
+    data = read_data_file(path, "JSON")
     try:
-        manifest = json.loads(path.read_text())
-        seeds = [load_scenario(out / s) for s in manifest["seeds"]]
-        cfg = FuzzConfig.from_json(manifest["config"])
-    except (KeyError, ValueError) as exc:
-        raise InvalidConfig(str(path), None, f"unreadable campaign manifest ({type(exc).__name__}: {exc})",
+        manifest = ManifestFile.model_validate(data)
+    except ValidationError as exc:
+        raise pydantic_error(str(path), exc, ManifestFile) from None
+    seeds = [load_scenario(out / s) for s in manifest.seeds]
+    try:
+        cfg = FuzzConfig.from_json(data["config"])
+    except (KeyError, ValueError, TypeError) as exc:
+        raise InvalidConfig(str(path), "config", f"unreadable ({type(exc).__name__}: {exc})",
                             "a manifest.json written by 'drivefuzz fuzz'") from None
-    return seeds, cfg, manifest.get("command", [])
+    cfg.oracles.instantiate(source=f"{path}: config.oracles")
+    check_journals(out, len(seeds))
+    return seeds, cfg, list(manifest.command)
 
 
 def _duration(seconds: float | None) -> str:

@@ -26,12 +26,23 @@ SCHEMA_VERSION = 1
 #: [m] body of the ego car that drivefuzz's physics simulates (every ADS drives the same car)
 EGO_LENGTH = 4.6
 EGO_WIDTH = 1.9  #: [m]
+#: [m/s] the fastest the ego may depart: SUMO's maxSpeed of a passenger car (its vType)
+EGO_MAX_SPEED = 55.55
 
 OptionValue = Union[bool, int, float, str]
 
 
+#: [m/s] the fastest anything in a scenario may go (360 km/h); SUMO fails on more, or on inf
+MAX_SPEED = 100.0
+#: [s] the longest simulated time anything in a scenario may refer to (a day)
+MAX_TIME = 86400.0
+#: [m] the largest coordinate or distance in a scenario (SUMO's networks are far smaller)
+MAX_COORD = 1e7
+
+
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, use_enum_values=False)
+    # every number finite: SUMO aborts, hangs or segfaults on inf and nan
+    model_config = ConfigDict(extra="forbid", frozen=True, use_enum_values=False, allow_inf_nan=False)
 
 
 class ActorKind(str, Enum):
@@ -55,17 +66,18 @@ class ManeuverAction(str, Enum):
 
 
 class Maneuver(_Model):
-    time: float = Field(ge=0.0, description="[s] after the actor departs")
+    time: float = Field(ge=0.0, le=MAX_TIME, description="[s] after the actor departs")
     action: ManeuverAction
-    value: float = Field(ge=0.0, description="[m/s] for speed, [s] duration for lane changes")
+    value: float = Field(ge=0.0, le=MAX_SPEED, description="[m/s] for speed, [s] duration for lane changes")
 
 
 class Mission(_Model):
     start_lane: str = Field(min_length=1, description="SUMO lane id the ego starts on")
-    start_pos: float = Field(ge=0.0, description="[m] of the front bumper along start_lane")
+    start_pos: float = Field(ge=0.0, le=MAX_COORD, description="[m] of the front bumper along start_lane")
     goal_edge: str = Field(min_length=1)
-    goal_pos: float = Field(ge=0.0, description="[m] along goal_edge")
-    start_speed: float = Field(default=0.0, ge=0.0, description="[m/s]")
+    goal_pos: float = Field(ge=0.0, le=MAX_COORD, description="[m] along goal_edge")
+    start_speed: float = Field(default=0.0, ge=0.0, le=EGO_MAX_SPEED,
+                               description="[m/s] (SUMO: at most the start lane's limit)")
 
     @property
     def start_edge(self) -> str:
@@ -77,11 +89,11 @@ class Actor(_Model):
     kind: ActorKind
     nav: NavType
     start_lane: str = Field(min_length=1)
-    start_pos: float = Field(ge=0.0, description="[m] along start_lane")
-    speed: float = Field(ge=0.0, description="[m/s] target speed")
-    depart: float = Field(default=0.0, ge=0.0, description="[s]")
+    start_pos: float = Field(ge=0.0, le=MAX_COORD, description="[m] along start_lane")
+    speed: float = Field(ge=0.0, le=MAX_SPEED, description="[m/s] target speed")
+    depart: float = Field(default=0.0, ge=0.0, le=MAX_TIME, description="[s]")
     dest_edge: str | None = Field(default=None, description="autopilot/maneuver/linear vehicles: destination edge")
-    dest_pos: float | None = Field(default=None, ge=0.0, description="[m] along dest_edge")
+    dest_pos: float | None = Field(default=None, ge=0.0, le=MAX_COORD, description="[m] along dest_edge")
     dest_xy: tuple[float, float] | None = Field(default=None, description="linear pedestrians: straight-line target [m]")
     maneuvers: tuple[Maneuver, ...] = ()
 
@@ -105,11 +117,11 @@ class Actor(_Model):
 class Puddle(_Model):
     """A reduced-friction area: an oriented rectangle."""
 
-    x: float = Field(description="[m] centre")
-    y: float = Field(description="[m] centre")
-    length: float = Field(gt=0.0, description="[m] along the rotated x axis")
-    width: float = Field(gt=0.0, description="[m]")
-    rotation: float = Field(default=0.0, description="[rad] ENU, counter-clockwise")
+    x: float = Field(ge=-MAX_COORD, le=MAX_COORD, description="[m] centre (validate: on the network)")
+    y: float = Field(ge=-MAX_COORD, le=MAX_COORD, description="[m] centre")
+    length: float = Field(gt=0.0, le=1e4, description="[m] along the rotated x axis")
+    width: float = Field(gt=0.0, le=1e4, description="[m]")
+    rotation: float = Field(default=0.0, ge=-1e3, le=1e3, description="[rad] ENU, counter-clockwise")
     friction: float = Field(gt=0.0, le=2.0, description="coefficient mu in (0, 2]")
 
     def corners(self) -> list[tuple[float, float]]:
@@ -141,8 +153,8 @@ class AdsSpec(_Model):
 
 
 class SimOptions(_Model):
-    step_length: float = Field(default=0.05, gt=0.0, le=1.0, description="[s]")
-    time_limit: float = Field(default=60.0, gt=0.0, description="[s] simulated")
+    step_length: float = Field(default=0.05, ge=0.001, le=1.0, description="[s] (SUMO counts in milliseconds)")
+    time_limit: float = Field(default=60.0, gt=0.0, le=MAX_TIME, description="[s] simulated")
 
 
 class Scenario(_Model):

@@ -264,6 +264,8 @@ def read_scenario(path: str | os.PathLike, *, validate_network: bool = True) -> 
         manifest = json.loads(manifest_path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise InvalidScenario(src, None, f"not valid JSON ({exc})") from None
+    except RecursionError:
+        raise InvalidScenario(src, None, "not valid JSON (nested too deeply)") from None
     if not isinstance(manifest, dict) or manifest.get("drivefuzz_scenario") != SCHEMA_VERSION:
         raise InvalidScenario(src, "drivefuzz_scenario", "missing or unsupported schema version",
                               f"{SCHEMA_VERSION}")
@@ -330,9 +332,13 @@ def _read_routes(path: Path) -> tuple[Mission, list[Actor]]:
             )))
         except ValidationError as exc:
             raise _pydantic_error(src, exc, prefix=f"{el.tag}[{el.get('id')}]") from None
-        except (KeyError, TypeError, AttributeError, ValueError) as exc:
+        except (KeyError, TypeError, AttributeError, ValueError, IndexError) as exc:
             raise InvalidScenario(src, f"{el.tag}[{el.get('id')}]",
-                                  f"missing or malformed attribute or drivefuzz param ({exc})") from None
+                                  f"missing or malformed attribute or drivefuzz param ({type(exc).__name__}: {exc})",
+                                  "what drivefuzz writes: a route of one or more edges, numbers, JSON maneuvers"
+                                  ) from None
+        except RecursionError:
+            raise InvalidScenario(src, f"{el.tag}[{el.get('id')}]", "drivefuzz.maneuvers nested too deeply") from None
     if mission is None:
         raise InvalidScenario(src, "vehicle[ego]", "no ego vehicle",
                               'a <vehicle id="ego"> with <param key="drivefuzz.role" value="ego"/>')
@@ -366,6 +372,11 @@ def load_scenario(path: str | os.PathLike) -> Scenario:
             data = json.loads(path.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise InvalidScenario(str(path), None, f"not valid JSON ({exc})") from None
+        except RecursionError:
+            raise InvalidScenario(str(path), None, "not valid JSON (nested too deeply)") from None
+        if not isinstance(data, dict):
+            raise InvalidScenario(str(path), None, f"a JSON {type(data).__name__}, not a scenario object",
+                                  "a scenario.json, or a JSON dump of a Scenario")
         if "drivefuzz_scenario" in data:
             return read_scenario(path)
         try:

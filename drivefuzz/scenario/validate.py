@@ -1,17 +1,26 @@
-"""Check a Scenario against its road network before anything runs.
+"""Check a Scenario against its road network, and the network itself, before anything runs.
 
-Every problem raises :class:`InvalidScenario` naming the file, the field and
-what would be valid. Returns the ego's route, which the writer needs anyway.
+Every problem raises :class:`InvalidScenario` (or :class:`InvalidNetwork`) naming
+the file, the field and what would be valid. :func:`validate` returns the ego's
+route, which the writer needs anyway.
+
+:func:`check_network` reads the raw XML for what SUMO needs but sumolib does not
+check (SUMO segfaults on some of it, and refuses the rest with a message that
+names only a temporary folder): the root element, lane indices, finite numbers,
+the junctions an edge joins, the traffic lights a connection names.
 """
 
 from __future__ import annotations
 
 import math
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
 
 from shapely.geometry import LineString, Polygon
 
-from drivefuzz.errors import InvalidScenario
-from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN, RoadMap
+from drivefuzz.errors import InvalidNetwork, InvalidScenario
+from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN, RoadMap, load_roadmap
 from drivefuzz.scenario import ActorKind, Puddle, Scenario, lane_edge
 
 
@@ -49,6 +58,7 @@ def _check_edge(rmap: RoadMap, src: str, field: str, edge_id: str, pos: float | 
 
 def validate(scenario: Scenario, rmap: RoadMap, source: str) -> tuple[str, ...]:
     """Raise InvalidScenario on the first problem; return the ego's route (normal edges)."""
+    check_network(rmap.path)
     m = scenario.mission
     _check_lane(rmap, source, "mission.start_lane", m.start_lane, m.start_pos, PASSENGER, "the ego is")
     _check_edge(rmap, source, "mission.goal_edge", m.goal_edge, m.goal_pos)
@@ -59,6 +69,7 @@ def validate(scenario: Scenario, rmap: RoadMap, source: str) -> tuple[str, ...]:
     if len(route) == 1 and m.goal_pos <= m.start_pos:
         raise InvalidScenario(source, "mission.goal_pos", f"goal {m.goal_pos} m lies behind the start "
                               f"{m.start_pos} m on the same edge", "a goal position ahead of the start")
+    x0, y0, x1, y1 = _bounds(rmap)
     for i, a in enumerate(scenario.actors):
         field = f"actors[{i}]({a.id}).start_lane"
         if a.kind is ActorKind.PEDESTRIAN:
@@ -75,11 +86,182 @@ def validate(scenario: Scenario, rmap: RoadMap, source: str) -> tuple[str, ...]:
                 raise InvalidScenario(source, f"actors[{i}]({a.id}).dest_edge",
                                       f"no route from {a.start_edge!r} to {a.dest_edge!r}",
                                       "a destination reachable from the actor's start")
+        if a.dest_xy is not None and not (x0 <= a.dest_xy[0] <= x1 and y0 <= a.dest_xy[1] <= y1):
+            raise InvalidScenario(source, f"actors[{i}]({a.id}).dest_xy", f"{a.dest_xy} is off the network",
+                                  f"x in [{x0:.0f}, {x1:.0f}], y in [{y0:.0f}, {y1:.0f}] m")
     for i, p in enumerate(scenario.puddles):
         for name in ("x", "y", "length", "width", "rotation", "friction"):
             if not math.isfinite(getattr(p, name)):
                 raise InvalidScenario(source, f"puddles[{i}].{name}", "not a finite number")
+        if not (x0 <= p.x <= x1 and y0 <= p.y <= y1):
+            raise InvalidScenario(source, f"puddles[{i}]", f"centre ({p.x}, {p.y}) is off the network",
+                                  f"x in [{x0:.0f}, {x1:.0f}], y in [{y0:.0f}, {y1:.0f}] m")
     return route
+
+
+def check_departure(scenario: Scenario, rmap: RoadMap, source: str) -> None:
+    """SUMO refuses (FatalTraCIError) an ego that departs faster than its start lane's speed limit.
+
+    Not part of :func:`validate` yet: the round-trip property test writes such
+    scenarios (they are well-formed, only not runnable). Called where a scenario
+    is about to run from a user's file.
+    """
+    m = scenario.mission
+    limit = rmap.lane(m.start_lane).getSpeed()
+    if m.start_speed > limit:
+        raise InvalidScenario(source, "mission.start_speed", f"{m.start_speed} m/s is faster than the speed limit "
+                              f"of the start lane {m.start_lane!r}", f"0 to {limit:.2f} m/s")
+
+
+#: [m] around the network's bounding box where puddles and walking targets may still lie
+BOUNDS_MARGIN = 100.0
+
+
+def _bounds(rmap: RoadMap) -> tuple[float, float, float, float]:
+    (x0, y0), (x1, y1) = rmap.net.getBBoxXY()
+    return x0 - BOUNDS_MARGIN, y0 - BOUNDS_MARGIN, x1 + BOUNDS_MARGIN, y1 + BOUNDS_MARGIN
+
+
+def load_network(path: str | os.PathLike) -> RoadMap:
+    """The network at ``path`` as a RoadMap, after :func:`check_network`."""
+    rmap = load_roadmap(path)
+    check_network(rmap.path)
+    return rmap
+
+
+_checked: dict[tuple[str, int, int], str | None] = {}
+
+
+def check_network(path: str | os.PathLike) -> None:
+    """Raise InvalidNetwork for what SUMO would crash on or refuse; once per file version per process."""
+    p = Path(path).resolve()
+    st = p.stat()
+    key = (str(p), st.st_mtime_ns, st.st_size)
+    if key not in _checked:
+        try:
+            _check_network_xml(p)
+            _checked[key] = None
+        except InvalidNetwork as exc:
+            _checked[key] = str(exc)
+            raise
+    if _checked[key] is not None:
+        raise InvalidNetwork(str(path), None, _checked[key].split(": ", 1)[-1])
+
+
+_SIGNALS = set("rRyYgGsuoO")
+
+
+def _finite(text: str | None) -> bool:
+    try:
+        return text is not None and math.isfinite(float(text))
+    except ValueError:
+        return False
+
+
+def _shape_ok(text: str | None) -> bool:
+    if text is None:
+        return True
+    try:
+        pts = [tuple(float(c) for c in pt.split(",")) for pt in text.split()]
+    except ValueError:
+        return False
+    return all(len(pt) in (2, 3) and all(math.isfinite(c) for c in pt) for pt in pts)
+
+
+def _check_network_xml(path: Path) -> None:
+    src = str(path)
+
+    def bad(field: str, problem: str, valid: str | None = None):
+        return InvalidNetwork(src, field, problem, valid)
+
+    junctions: set[str] = set()
+    edges: dict[str, tuple[str | None, str | None]] = {}  # id -> (from, to) of normal edges
+    current = ["", 0]  # the edge being read, and how many lanes it has had
+    tls: dict[str, int] = {}  # tlLogic id -> signals in its shortest phase
+    links: list[tuple[str, int, str]] = []  # (tl, linkIndex, connection)
+    root_seen = False
+    try:
+        for event, el in ET.iterparse(path, events=("start", "end")):
+            if event == "start":
+                if not root_seen:
+                    root_seen = True
+                    if el.tag != "net":
+                        raise bad(f"<{el.tag}>", "the root element is not <net>", "a .net.xml written by netconvert")
+                if el.tag == "edge":
+                    current[:] = [el.get("id", ""), 0]
+                continue
+            tag = el.tag
+            if tag == "lane":
+                _check_lane_el(el, current, bad)
+            elif tag == "edge":
+                eid = el.get("id", "")
+                if el.get("function") not in ("internal", "walkingarea", "crossing"):
+                    edges[eid] = (el.get("from"), el.get("to"))
+            elif tag == "junction":
+                jid = el.get("id", "")
+                junctions.add(jid)
+                for name in ("x", "y"):
+                    if not _finite(el.get(name)):
+                        raise bad(f"junction[{jid}].{name}", f"{el.get(name)!r} is not a finite number")
+                if not _shape_ok(el.get("shape")):
+                    raise bad(f"junction[{jid}].shape", "not a list of finite x,y points")
+            elif tag == "tlLogic":
+                tid = el.get("id", "")
+                states = [ph.get("state", "") for ph in el.findall("phase")]
+                if not states:
+                    raise bad(f"tlLogic[{tid}]", "has no phases", "<phase duration=... state=.../>")
+                for ph in el.findall("phase"):
+                    d = ph.get("duration")
+                    if not _finite(d) or float(d) <= 0:
+                        raise bad(f"tlLogic[{tid}].phase.duration", f"{d!r} is not a positive number of seconds")
+                    if not set(ph.get("state", "")) <= _SIGNALS or len(ph.get("state", "")) != len(states[0]):
+                        raise bad(f"tlLogic[{tid}].phase.state", f"{ph.get('state')!r} is not a signal state "
+                                  "as long as the others", "characters of rRyYgGsuoO")
+                tls[tid] = len(states[0])
+            elif tag == "connection" and el.get("tl") is not None:
+                name = f"connection[{el.get('from')}->{el.get('to')}]"
+                try:
+                    links.append((el.get("tl"), int(el.get("linkIndex", "")), name))
+                except ValueError:
+                    raise bad(f"{name}.linkIndex", f"{el.get('linkIndex')!r} is not an integer") from None
+            elif tag == "location":
+                for name in ("netOffset", "convBoundary"):
+                    if el.get(name) is not None and not all(_finite(v) for v in el.get(name).split(",")):
+                        raise bad(f"location.{name}", f"{el.get(name)!r} is not a list of finite numbers")
+            if tag in ("edge", "junction", "tlLogic", "connection"):
+                el.clear()
+    except ET.ParseError as exc:
+        raise bad(None, f"malformed XML ({exc})", "a .net.xml written by netconvert") from None
+    except RecursionError:
+        raise bad(None, "nested too deeply", "a .net.xml written by netconvert") from None
+    for eid, (a, b) in edges.items():
+        for end, node in (("from", a), ("to", b)):
+            if node is not None and node not in junctions:
+                raise bad(f"edge[{eid}].{end}", f"unknown junction {node!r}", "the id of a <junction>")
+    for tl, index, name in links:
+        if tl not in tls:
+            raise bad(f"{name}.tl", f"unknown traffic light {tl!r}", "the id of a <tlLogic>")
+        if not 0 <= index < tls[tl]:
+            raise bad(f"{name}.linkIndex", f"{index} is not a signal of traffic light {tl!r}",
+                      f"0 to {tls[tl] - 1}")
+
+
+def _check_lane_el(el: ET.Element, current: list, bad) -> None:
+    lid = el.get("id", "")
+    expected = current[1]
+    if el.get("index") != str(expected):
+        raise bad(f"lane[{lid}].index", f"{el.get('index')!r} out of order on edge {current[0]!r}",
+                  f"{expected} (an edge's lanes are numbered from 0)")
+    current[1] = expected + 1
+    for name in ("speed", "length"):
+        v = el.get(name)
+        if not _finite(v) or float(v) < 0 or (name == "speed" and float(v) == 0):
+            raise bad(f"lane[{lid}].{name}", f"{v!r} is not a {'positive' if name == 'speed' else 'non-negative'} "
+                      "finite number")
+    if el.get("width") is not None and (not _finite(el.get("width")) or float(el.get("width")) <= 0):
+        raise bad(f"lane[{lid}].width", f"{el.get('width')!r} is not a positive finite number")
+    if not _shape_ok(el.get("shape")):
+        raise bad(f"lane[{lid}].shape", "not a list of finite x,y points")
 
 
 def puddle_polygon(p: Puddle) -> Polygon:

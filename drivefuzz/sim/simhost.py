@@ -17,6 +17,14 @@ campaign goes on. The child is started with :mod:`subprocess`, not
 ``distributed.worker.daemon: False``. It ignores SIGINT (the parent decides when a
 campaign stops) and exits on its own when its parent dies, even mid-execution.
 
+The child runs ``python -I``: neither the current folder nor ``PYTHONPATH`` is on its
+import path by Python's doing, so a ``shapely.py`` lying in the folder drivefuzz was
+started from (a downloaded finding, say) is never imported. It gets the parent's import
+path instead, less the current folder (unless ``PYTHONPATH`` names it): whatever plugin
+the parent can import, the child can. Its temporary files live in a folder of the
+parent's (``TMPDIR``), removed when the child ends, so that a child killed mid-execution
+leaves no ``drivefuzz-run-*`` behind (and the next host removes those of a parent that was killed).
+
 Protocol on the child's stdin/stdout: 8-byte big-endian length + pickle, both ways.
 """
 
@@ -25,10 +33,12 @@ from __future__ import annotations
 import os
 import pickle
 import select
+import shutil
 import signal
 import struct
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 import traceback
@@ -45,6 +55,12 @@ _MAGIC = b"DFZ1"
 _HEADER = struct.Struct(">4sQ")  # magic, length: anything else on the pipe is a protocol error
 #: [s] for the child to import drivefuzz and libsumo and say it is ready (not part of an execution's time)
 START_TIMEOUT = 120.0
+#: the parent's import path for the child (``python -I`` ignores PYTHONPATH)
+PATH_ENV = "DRIVEFUZZ_SIMHOST_PATH"
+#: what the child runs: the parent's import path first, then the host's loop
+_BOOTSTRAP = ("import os, sys; "
+              f"sys.path[:0] = [p for p in os.environ.get({PATH_ENV!r}, '').split(os.pathsep) if p]; "
+              "from drivefuzz.sim.simhost import _serve; _serve()")
 
 
 class ProtocolError(Exception):
@@ -114,6 +130,7 @@ class SimHost:
         self.timeout_s = timeout_s
         self.proc: subprocess.Popen | None = None
         self._path = ""
+        self._tmp: str | None = None  # the child's TMPDIR
         self.starts = 0
 
     def __enter__(self) -> "SimHost":
@@ -124,15 +141,37 @@ class SimHost:
 
     @staticmethod
     def _pythonpath() -> str:
-        return os.pathsep.join(p for p in sys.path if p)
+        """The parent's import path for the child, less the current folder (unless PYTHONPATH names it)."""
+        try:
+            cwd = os.getcwd()
+        except OSError:  # the current folder was deleted
+            cwd = ""
+        asked = {os.path.abspath(p) for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p}
+        keep = []
+        for p in sys.path:
+            if not p:
+                continue
+            p = os.path.abspath(p)
+            if p == cwd and p not in asked:
+                continue
+            if p not in keep:
+                keep.append(p)
+        return os.pathsep.join(keep)
 
     def _start(self) -> None:
         env = dict(os.environ)
         # plugins importable in the parent (installed, or on a test's sys.path) must be importable here too
-        env["PYTHONPATH"] = self._path = self._pythonpath()
+        env[PATH_ENV] = self._path = self._pythonpath()
+        _sweep_orphans()
+        self._tmp = tempfile.mkdtemp(prefix=f"drivefuzz-host-{os.getpid()}-")
+        env["TMPDIR"] = self._tmp
         # its own session: a terminal's Ctrl-C does not reach it, and killpg also ends what a plugin started
-        self.proc = subprocess.Popen([sys.executable, "-m", "drivefuzz.sim.simhost"], stdin=subprocess.PIPE,
-                                     stdout=subprocess.PIPE, env=env, close_fds=True, start_new_session=True)
+        try:
+            self.proc = subprocess.Popen([sys.executable, "-I", "-c", _BOOTSTRAP], stdin=subprocess.PIPE,
+                                         stdout=subprocess.PIPE, env=env, close_fds=True, start_new_session=True)
+        except OSError:
+            self._remove_tmp()
+            raise
         self.starts += 1
         try:
             ready = _receive(self.proc.stdout.fileno(), time.monotonic() + START_TIMEOUT)
@@ -140,10 +179,11 @@ class SimHost:
             ready = None
         if ready != ("ready",):
             self._kill()
-            raise SimulationError(f"the simulation host did not start ({sys.executable} -m drivefuzz.sim.simhost)")
+            raise SimulationError(f"the simulation host did not start ({sys.executable} -I -c {_BOOTSTRAP!r})")
 
     def _kill(self) -> None:
         if self.proc is None:
+            self._remove_tmp()
             return
         if self.proc.poll() is None:
             try:
@@ -157,6 +197,12 @@ class SimHost:
             except OSError:
                 pass
         self.proc = None
+        self._remove_tmp()
+
+    def _remove_tmp(self) -> None:
+        if self._tmp is not None:  # with whatever a child killed mid-execution left in it
+            shutil.rmtree(self._tmp, ignore_errors=True)
+            self._tmp = None
 
     def close(self) -> None:
         if self.proc is not None and self.proc.poll() is None:
@@ -207,6 +253,22 @@ class SimHost:
             return Outcome(OK, execution=reply[1], wall_time=wall)
         _, status, error_type, detail, tb = reply
         return Outcome(status, detail=detail, error_type=error_type, traceback=tb, wall_time=wall)
+
+
+def _sweep_orphans() -> None:
+    """Remove the temporary folders of hosts whose parent was killed (SIGKILL skips every cleanup)."""
+    import glob
+
+    for path in glob.glob(os.path.join(tempfile.gettempdir(), "drivefuzz-host-*-*")):
+        try:
+            pid = int(os.path.basename(path).split("-")[2])
+            if os.stat(path).st_uid != os.getuid():
+                continue
+            os.kill(pid, 0)
+        except ProcessLookupError:  # its parent is gone
+            shutil.rmtree(path, ignore_errors=True)
+        except (ValueError, IndexError, OSError):  # not one of ours, or a live process of another user
+            continue
 
 
 # ------------------------------------------------------------------------ child side
