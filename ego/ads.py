@@ -9,6 +9,10 @@ Options (``--ads-option K=V``):
   step the steering command is a constant :data:`STEER_LEFT_COMMAND` of full lock to the
   left, open loop, whatever the path tracker asks; on every committed seed the car
   leaves its lane within three seconds of the takeover).
+  Hidden faults, silent on every committed seed (no actors, clear weather), for measuring how fast a search
+  reveals a bug that only a situation it builds can show: ``ignore_pedestrians`` (pedestrians are never
+  obstacles), ``late_braking`` (obstacles count only within :data:`LATE_BRAKING_M` m), ``no_fog_slowdown``
+  (no assured-clear-distance cap: it keeps its clear-weather speed in fog).
 - ``speed_margin``: fraction of the speed limit it aims for (default 0.95).
 - ``max_lat_accel``: comfort limit in curves [m/s^2].
 - ``sensor_range``: clear-weather sensor range [m].
@@ -40,7 +44,10 @@ from ego.planning import (CELL, assured_clear_speed, build_path, idm_accel, lawf
                           speed_profile, stop_accel)
 from ego.sensing import Sensors, SensorSpec
 
-FAULTS = ("none", "speeding", "no_traffic_lights", "no_control", "steer_left")
+FAULTS = ("none", "speeding", "no_traffic_lights", "no_control", "steer_left", "ignore_pedestrians", "late_braking",
+          "no_fog_slowdown")
+#: [m] the ``late_braking`` fault sees obstacles only this close (front bumper to their centre, along the path).
+LATE_BRAKING_M = 4.0
 #: [s] the ``steer_left`` fault drives normally this long after the first step, then takes over.
 STEER_LEFT_DELAY = 1.0
 #: Steering command of the ``steer_left`` fault, as a fraction of full lock (0.15 rad at the road wheels).
@@ -72,7 +79,8 @@ class ReferenceADS(ADS):
     name = "ego"
 
     class Options(ADS.Options):
-        fault: Literal["none", "speeding", "no_traffic_lights", "no_control", "steer_left"] = "none"
+        fault: Literal["none", "speeding", "no_traffic_lights", "no_control", "steer_left", "ignore_pedestrians",
+                       "late_braking", "no_fog_slowdown"] = "none"
         speed_margin: float = 0.95
         max_lat_accel: float = 2.5
         sensor_range: float = 100.0
@@ -156,6 +164,8 @@ class ReferenceADS(ADS):
         # a wet road grips less (the driver sees it): count on less braking
         decel = ACDA_DECEL * (1.0 - 0.3 * max(w.wetness, w.rain) / 100.0)
         clear = range_m - ACDA_MARGIN - obs.ego.length / 2.0
+        if self.options.fault == "no_fog_slowdown":
+            return v0
         return min(v0, max(assured_clear_speed(clear, decel, ACDA_REACTION), 1.0))
 
     def _obstacle_accel(self, world, ego, s_c: float, lat_c: float, v0: float) -> float:
@@ -172,8 +182,11 @@ class ReferenceADS(ADS):
         lo, hi = path.window(self.path_idx, 120)
         reach = 90.0 + abs(lat_c)
         ex, ey = ego.x, ego.y
+        fault = self.options.fault
         for tr in world.tracks:
             ped = tr[PED]
+            if ped and fault == "ignore_pedestrians":
+                continue
             corridor = 1.3 + tr[WIDTH] / 2 + (0.8 if ped else 0.0)
             for horizon in (0.0, 1.5) if ped else (0.0,):
                 px = tr[X] + tr[SPEED] * math.cos(tr[HEADING]) * horizon if horizon else tr[X]
@@ -189,6 +202,8 @@ class ReferenceADS(ADS):
                     _, s_o, lat_o = path.locate(px, py, self.path_idx, window=120)
                 ahead = s_o - s_c
                 if ahead <= 0 or ahead > 80 or abs(lat_o) > corridor:
+                    continue
+                if fault == "late_braking" and ahead - half > LATE_BRAKING_M:
                     continue
                 gap = ahead - half - tr[LENGTH] / 2
                 dv = v - tr[SPEED] * max(math.cos(tr[HEADING] - ego.heading), 0.0)

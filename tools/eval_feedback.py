@@ -9,7 +9,8 @@ of executions, and differ only in how successors are chosen:
 
 Each runs ``--reps`` times per network with campaign seeds 0..reps-1 (rep r uses seed r in every
 configuration). A campaign spends its whole budget (``--max-execs``): a finding ends its lineage, not the
-campaign. Every repetition runs in its own process (``--jobs`` at once).
+campaign. Every repetition runs in its own process (``--jobs`` at once). Reproduction reruns are off
+(``reproduce=0``): they do not change what is counted, only the wall time; the counterfactual replay stays.
 
 **Distinct misbehaviours** are counted by the finding's semantic signature (:mod:`drivefuzz.triage.signature`:
 oracle, kind, the ego's manoeuvre, road element and right-of-way class, the other party and its approach,
@@ -49,7 +50,7 @@ REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
 #: Faults of the reference ADS that no committed seed shows: only a situation the fuzzer builds reveals them.
-HIDDEN_FAULTS = ("ignore_pedestrians", "late_braking", "no_yield", "no_fog_slowdown")
+HIDDEN_FAULTS = ("ignore_pedestrians", "late_braking", "no_fog_slowdown")
 
 
 def _seeds(network: str):
@@ -78,7 +79,7 @@ def run_one(network: str, feedback: str, rep: int, opts: dict) -> dict:
 
     ads = AdsSpec(name="ego", options={"fault": opts["fault"]} if opts.get("fault") else {})
     cfg = FuzzConfig(cycles=opts["cycles"], population=opts["population"], strategy=opts["strategy"], seed=rep,
-                     max_execs=opts["execs"], feedback=feedback, ads=ads)
+                     max_execs=opts["execs"], feedback=feedback, ads=ads, reproduce=0)
     with tempfile.TemporaryDirectory(prefix="eval-feedback-") as tmp:
         t0 = time.perf_counter()
         campaign = Campaign(Path(tmp) / "out", _seeds(network), cfg)
