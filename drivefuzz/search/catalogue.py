@@ -65,21 +65,9 @@ def _route_spot(mut: Mutator, sc: Scenario, dist: float) -> tuple[int, str, floa
     for i, e in enumerate(route):
         length = mut.rmap.edge(e).getLength()
         if pos <= length:
-            return i, _ego_lane(mut, sc, i), round(min(max(pos, 1.0), length - 0.5), 2)
+            return i, mut.ego_lane(sc, i), round(min(max(pos, 1.0), length - 0.5), 2)
         pos -= length
     return None
-
-
-def _ego_lane(mut: Mutator, sc: Scenario, i: int) -> str:
-    """The lane of route edge ``i`` the ego drives: its start lane, or one that leads on along the route."""
-    route = mut._route(sc)
-    if i == 0:
-        return sc.mission.start_lane
-    if i + 1 < len(route):
-        conns = mut.rmap.connections(route[i], route[i + 1])
-        if conns:
-            return conns[0][0]
-    return mut.rmap.drive_lane(route[i])
 
 
 def _new_id(sc: Scenario, prefix: str, taken: list[Actor]) -> str:
@@ -252,7 +240,7 @@ def slippery_braking_zone(mut, sc, rng):
     if len(route) < 2:
         return None
     i = rng.randrange(len(route) - 1)
-    lane = _ego_lane(mut, sc, i)
+    lane = mut.ego_lane(sc, i)
     geom = mut.rmap.geom(lane)
     if rng.random() < 0.5:  # in the turn: the junction passage after edge i
         conns = mut.rmap.connections(route[i], route[i + 1])

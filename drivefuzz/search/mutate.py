@@ -132,8 +132,21 @@ class Mutator:
             self._route_cache[key] = self.rmap.route(*key) or (sc.mission.start_edge,)
         return self._route_cache[key]
 
-    def _spot_along(self, sc: Scenario, rng: random.Random, dist: float, vclass: str) -> _Spot | None:
-        """A lane position ``dist`` metres along the ego's route from its start (negative: behind)."""
+    def ego_lane(self, sc: Scenario, i: int) -> str:
+        """The lane of route edge ``i`` the ego drives: its start lane, or one that leads on along the route."""
+        route = self._route(sc)
+        if i == 0:
+            return sc.mission.start_lane
+        if i + 1 < len(route):
+            conns = self.rmap.connections(route[i], route[i + 1])
+            if conns:
+                return conns[0][0]
+        return self.rmap.drive_lane(route[i])
+
+    def _spot_along(self, sc: Scenario, rng: random.Random, dist: float, vclass: str,
+                    ego_lane: bool = False) -> _Spot | None:
+        """A lane position ``dist`` metres along the ego's route from its start (negative: behind); with
+        ``ego_lane``, on the lane the ego will drive there."""
         route = self._route(sc)
         pos = sc.mission.start_pos + dist
         i = 0
@@ -152,6 +165,8 @@ class Mutator:
         if vclass == PEDESTRIAN:  # a sidewalk; on roads without one, the edge of a lane walkers may use
             lanes = ([l for l in edge.getLanes() if l.allows(PEDESTRIAN) and not l.allows(PASSENGER)]
                      or [l for l in edge.getLanes()[:1] if l.allows(PEDESTRIAN)])
+        elif ego_lane:
+            lanes = [self.rmap.lane(self.ego_lane(sc, i))]
         else:
             lanes = [l for l in edge.getLanes() if l.allows(PASSENGER)]
         if not lanes:
@@ -517,7 +532,9 @@ class Mutator:
         if len(sc.puddles) >= cfg.max_puddles:
             return Mutation(sc, f"no puddle added (limit of {cfg.max_puddles} reached)")
         for attempt in range(cfg.max_retries):
-            spot = self._spot_along(sc, rng, rng.uniform(cfg.min_range + 5.0, cfg.max_range), PASSENGER)
+            # where the ego will drive: on its lane (the catalogue adds puddles in its braking zones and turns)
+            spot = self._spot_along(sc, rng, rng.uniform(cfg.min_range + 5.0, cfg.max_range), PASSENGER,
+                                    ego_lane=True)
             if spot is None:
                 continue
             p = Puddle(x=round(spot.x, 2), y=round(spot.y, 2), length=round(rng.uniform(4.0, 15.0), 2),
