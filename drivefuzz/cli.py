@@ -470,7 +470,7 @@ def _print_findings(title: str, findings) -> None:
         rep = f.reproduction or {}
         rate = f"{rep['reproduced']}/{rep['runs']} {'robust' if rep.get('robust') else 'knife-edge'}" if rep else "-"
         click.echo(f"{i:>3} {f.hits:>5}  {rate:<16} {when}  {f.label}")
-        click.echo(f"{'':>38}{replay_command(f.path)}")
+        click.echo(f"{'':>38}{replay_command(f.path, f.ads)}")
 
 
 def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):

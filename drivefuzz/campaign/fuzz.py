@@ -78,6 +78,7 @@ class Finding:
     attribution: dict[str, Any] | None = None
     reproduction: dict[str, Any] | None = None
     hits: int = 1  # executions that hit this signature
+    ads: str | None = None  # the ADS that failed (replay must name it when it is not an installed plugin)
 
     @property
     def label(self) -> str:
@@ -116,14 +117,19 @@ def parse_duration(text: str | None, source: str = "--budget") -> float | None:
     return h * 3600 + mi * 60 + sec
 
 
-def replay_command(finding_dir: Path) -> str:
-    return f"drivefuzz replay {shlex.quote(str(finding_dir))}"
+def replay_command(finding_dir: Path, ads_name: str | None = None) -> str:
+    """The command that replays a finding (naming its ADS when that is not an installed plugin)."""
+    from drivefuzz.ads import available_ads
+
+    trust = "" if ads_name is None or ads_name in available_ads() else f" --ads {shlex.quote(ads_name)}"
+    return f"drivefuzz replay {shlex.quote(str(finding_dir))}{trust}"
 
 
 def load_finding(path: Path) -> Finding:
     v = json.loads((path / "verdict.json").read_text())
     return Finding(path, Misbehavior.from_dict(v["misbehaviors"][0]), v["scenario_hash"], v.get("seed_index", 0),
-                   v.get("key", ""), v.get("signature") or {}, v.get("attribution"), v.get("reproduction"))
+                   v.get("key", ""), v.get("signature") or {}, v.get("attribution"), v.get("reproduction"),
+                   ads=(v.get("ads") or {}).get("name") if isinstance(v.get("ads"), dict) else None)
 
 
 class Campaign:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shlex
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -36,9 +37,13 @@ FINDINGS = "findings"
 INCIDENTS = "incidents"
 
 
-def replay_script() -> str:
+def replay_script(ads_name: str = "ego") -> str:
+    """``replay.sh``; an ADS that is not an installed plugin must be named on the command line to be trusted."""
+    from drivefuzz.ads import available_ads
+
+    trust = "" if ads_name in available_ads() else f" --ads {shlex.quote(ads_name)}"
     return ("#!/bin/sh\n# Runs this finding again and checks it reproduces.\n"
-            'cd "$(dirname "$0")" && exec drivefuzz replay .\n')
+            f'cd "$(dirname "$0")" && exec drivefuzz replay .{trust}\n')
 
 
 @dataclass(frozen=True)
@@ -138,10 +143,10 @@ class FindingStore:
                 "seed_index": int(key.split("/")[0]) if key.split("/")[0].isdigit() else 0,
                 "frames": None if trace is None else trace.n_frames,
                 "attribution": None if att is None else att.as_dict(), "signature": {"key": sig_key, **sig},
-                "reproduction": reproduction, "triage_executions": spent,
+                "reproduction": reproduction, "triage_executions": spent, "ads": scenario.ads.model_dump(mode="json"),
                 "drivefuzz": drivefuzz.__version__, **self.extra, **(extra or {}),
             })
-            atomic_write_text(tmp / "replay.sh", replay_script())
+            atomic_write_text(tmp / "replay.sh", replay_script(scenario.ads.name))
             os.chmod(tmp / "replay.sh", 0o755)
         return Triaged(rel, sig_key, fault, True, spent)
 
