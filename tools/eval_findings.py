@@ -204,13 +204,17 @@ def _print_triage_cost(out: Path, folders: list[dict[str, Any]]) -> None:
           f"{total / max(len(folders), 1):.1f} each, max {max((r['triage'] for r in folders), default=0)}")
     recs = _journal(out)
     plain = [r["wall_time"] for r in recs if r.get("wall_time") and not r.get("signature")]
-    new = [r for r in recs if r.get("triage_execs")]
+    firsts = {r["verdict"].get("key") for r in folders}
+    new = [r for r in recs if r.get("key") in firsts]
+    repeats = [r for r in recs if r.get("signature") and r.get("key") not in firsts and r.get("triage_execs")]
     if new and plain:
         mean_exec = sum(plain) / len(plain)
-        t_new = [(r.get("timings") or {}).get("triage", 0.0) for r in new]
-        per = sum(t_new) / len(new)
+        per = sum((r.get("timings") or {}).get("triage", 0.0) for r in new) / len(new)
         print(f"triage wall time per new signature: {per:.2f} s = {per / mean_exec:.1f} executions' worth "
               f"(mean clean execution {mean_exec:.2f} s; the goal: at most 15)")
+    if repeats:  # the rules blamed the ego, the counterfactual moved it onto a known incident's signature
+        print(f"repeats of a known signature that ran a counterfactual again: {len(repeats)}, "
+              f"{sum(r['triage_execs'] for r in repeats)} executions")
 
 
 if __name__ == "__main__":
