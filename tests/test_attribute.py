@@ -262,12 +262,16 @@ def test_unknown_other_party_is_unclear():
     assert attribute(sc, ex.trace, m, load_roadmap(NET)).fault is Fault.UNCLEAR
 
 
-@pytest.mark.parametrize("oracle, kind, replayed", [("speeding", "speeding", False), ("red_light", "red", False),
-                                                    ("lane_invasion", "opposite_lane", True)])
-def test_the_ego_own_driving_is_ego(oracle, kind, replayed):
-    # red lights and speed limits bind whatever happens around: no replay; lane keeping may be lost to
-    # wind or ice, so a careful driver failing the same way excuses it
-    sc = scenario("A0B0_1", 10.0, "B0C0", 40.0)
+@pytest.mark.parametrize("oracle, kind, wind, replayed", [
+    ("speeding", "speeding", 0.0, False), ("red_light", "red", 0.0, False),
+    ("lane_invasion", "opposite_lane", 0.0, False), ("lane_invasion", "opposite_lane", 80.0, True)])
+def test_the_ego_own_driving_is_ego(oracle, kind, wind, replayed):
+    # red lights and speed limits bind whatever happens around: no replay; lane keeping on a dry, calm road
+    # neither (the careful driver tracks its path the same way); lane keeping may be lost to wind or ice,
+    # so there a careful driver failing the same way excuses it
+    from drivefuzz.scenario import Weather
+
+    sc = scenario("A0B0_1", 10.0, "B0C0", 40.0).model_copy(update={"weather": Weather(wind=wind)})
     ex = execute(sc, oracles=oracles())
     m = Misbehavior(oracle, kind, 50, 2.5, (0.0, 0.0))
     assert attribute(sc, ex.trace, m, load_roadmap(NET)).fault is Fault.EGO
@@ -326,3 +330,21 @@ def test_careful_driver_is_slower_in_fog_and_keeps_a_longer_gap():
         f = a.frame[rows]
         gaps[name] = float((a.x[rows] - tr["x"][f])[tr["t"][f] > 15.0].min())
     assert gaps["careful"] > gaps["ego"] + 2.0
+
+
+# ------------------------------------------------------------------ a way on along the route
+@pytest.mark.parametrize("blocker_pos, fault", [(97.0, Fault.OTHER), (45.0, Fault.EGO)])
+def test_a_free_lane_counts_only_if_it_leads_on(blocker_pos, fault):
+    """The ego turns left at D1 from D0D1, whose only left-turn lane is D0D1_2; D0D1_1 goes straight on.
+    A parked car at the end of D0D1_2 blocks the route (the free lane does not lead on): not the ego's
+    fault. Parked mid-lane, the ego could pass it on D0D1_1 and merge back: waiting for ever is its fault."""
+    parked = Actor(id="v1", kind="vehicle", nav="immobile", start_lane="D0D1_2", start_pos=blocker_pos, speed=0.0)
+    sc = scenario("D0D1_2", 5.0, "D1C1", 40.0, parked, time_limit=80.0)
+    ex = execute(sc, oracles=[ImmobilityOracle()])
+    (m,) = [m for m in ex.misbehaviors if m.oracle == "immobility"]
+    v = attribute(sc, ex.trace, m, load_roadmap(NET))
+    assert v.fault is fault, v.reason
+    if fault is Fault.OTHER:
+        assert v.evidence["free_lanes"] == []
+    else:
+        assert "D0D1_1" in v.reason

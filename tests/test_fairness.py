@@ -82,3 +82,22 @@ def test_a_moved_actor_is_rechecked(town, town_scenario, mut):
         m = mut.target(sc, 0, random.Random(k))
         others = sc.model_copy(update={"actors": ()})
         assert unfair(mut, others, m.scenario.actors[0]) is None, m.description
+
+
+def test_an_obstacle_leaves_a_way_on_along_the_route(town, mut):
+    """D0D1_2 is the only lane of D0D1 that turns left to D1C1: a car parked at its end blocks the route;
+    mid-lane there is room to pass it on D0D1_1 and merge back; none stands in a junction's exit."""
+    from drivefuzz.scenario import Mission, Scenario
+
+    from conftest import TOWN
+
+    sc = Scenario(network=str(TOWN), mission=Mission(start_lane="D0D1_2", start_pos=5.0, goal_edge="D1C1",
+                                                      goal_pos=60.0))
+
+    def parked(lane, pos):
+        return Actor(id="v9", kind=ActorKind.VEHICLE, nav=NavType.IMMOBILE, start_lane=lane, start_pos=pos, speed=0.0)
+
+    assert "the only lane on" in unfair(mut, sc, parked("D0D1_2", 97.0))
+    assert unfair(mut, sc, parked("D0D1_2", 45.0)) is None
+    assert unfair(mut, sc, parked("D0D1_1", 97.0)) is None  # not on the way the ego needs
+    assert "exit of the junction" in unfair(mut, sc, parked("D1C1_2", 6.0))

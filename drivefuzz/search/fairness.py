@@ -11,7 +11,9 @@ no driver could get out of. After every placement, position, timing or speed cha
 - **walkers step out in time**: a jaywalker must reach the ego's path either after the ego has passed or
   while the ego can still stop before it (careful braking ``EGO_DECEL`` after ``REACTION``);
 - **obstacles are not at the start**: an immobile actor stands at least ``MutationConfig.immobile_min_range``
-  metres ahead of the ego's start along its route (or behind it).
+  metres ahead of the ego's start along its route (or behind it);
+- **obstacles leave a way on**: an immobile vehicle on the ego's route does not stand in a junction's exit,
+  and leaves another lane that leads on along the route, or room to pass it and merge back.
 
 The ego's expected motion comes from the mutator's profile of how the reference ADS drives the empty route
 (:meth:`drivefuzz.search.mutate.Mutator._ego_profile`). Never imports libsumo.
@@ -36,6 +38,8 @@ EGO_DECEL = 5.0  # [m/s^2] a careful driver's firm braking on a dry road
 REACTION = 0.75  # [s] a careful driver's reaction time
 MARGIN = 2.0  # [m] left over after a stop
 VEHICLE_LENGTH = 5.0  # [m] SUMO's default passenger car
+MERGE_ROOM = 20.0  # [m] past an obstacle, to merge back into the only lane that leads on
+JUNCTION_EXIT = 15.0  # [m] the first metres of an edge after a junction: no obstacle there
 
 
 def stopping_distance(speed: float, decel: float, reaction: float = 0.0) -> float:
@@ -80,6 +84,10 @@ def unfair(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
         return None
     if actor.nav is NavType.IMMOBILE and actor.depart <= 0.0 and 0.0 <= d < mut.cfg.immobile_min_range:
         return f"stands {d:.1f} m ahead of the ego's start"
+    if actor.nav is NavType.IMMOBILE and d > 0.0:
+        why = _blocks_the_route(mut, sc, actor)
+        if why:
+            return why
     ego_front, ego_v = _ego_at(mut, sc, actor.depart)
     # SUMO's lane position of a vehicle is its front bumper
     gap_behind = ego_front - EGO_LENGTH - d  # actor's front -> ego's rear
@@ -95,6 +103,28 @@ def unfair(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
         need = stopping_distance(ego_v, EGO_DECEL, REACTION) + MARGIN
         if gap_ahead < need:
             return f"appears {gap_ahead:.1f} m ahead of the ego at {actor.depart:.1f} s, it needs {need:.1f} m"
+    return None
+
+
+def _blocks_the_route(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
+    """An obstacle must leave a lawful way on along the ego's route: another lane of its edge that leads to
+    the route's next edge, or room (``MERGE_ROOM``) to pass it and merge back before its lane ends; and it
+    must not stand in a junction's exit (the first ``JUNCTION_EXIT`` metres of an edge after the start)."""
+    rmap, route = mut.rmap, mut._route(sc)
+    edge = rmap.lane(actor.start_lane).getEdge().getID()
+    if edge not in route:
+        return None
+    i = route.index(edge)
+    if i > 0 and actor.start_pos < JUNCTION_EXIT:
+        return f"stands {actor.start_pos:.1f} m into {edge}, in the exit of the junction the ego comes through"
+    if i + 1 >= len(route):
+        return None
+    leads = {fl for fl, _tl, _via in rmap.connections(edge, route[i + 1])}
+    if leads - {actor.start_lane}:
+        return None  # another lane leads on
+    room = rmap.lane(actor.start_lane).getLength() - actor.start_pos
+    if room < MERGE_ROOM:
+        return f"blocks {actor.start_lane}, the only lane on to {route[i + 1]}, {room:.1f} m before its end"
     return None
 
 

@@ -76,6 +76,10 @@ from drivefuzz.triage.evidence import (
     wrap_angle,
 )
 
+#: Oracles whose verdicts the counterfactual does not settle (see :func:`attribute`).
+NO_COUNTERFACTUAL = frozenset({"lane_invasion", "immobility", "mission"})
+#: [m] room a driver needs past a stationary body to merge back into a lane that leads on along the route.
+MERGE_ROOM = 20.0
 #: The ADS the counterfactual replay uses.
 CAREFUL_ADS = "careful"
 
@@ -131,9 +135,24 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
     f = min(max(int(misbehavior.frame), 0), n - 1)
     ev = _Event(scenario, trace, misbehavior, rmap, f)
     verdict = ev.judge()
-    if verdict.fault is not Fault.OTHER and not ev.decided and replay is not None:
+    # the careful driver shares the reference's path tracking and never overtakes: for standstills, and for
+    # lane keeping on a dry, calm road, its failing too says nothing about avoidability (the rules decide);
+    # lane keeping lost to ice or wind may have been unavoidable, which the replay can show
+    oracle = misbehavior.oracle
+    settles = oracle not in NO_COUNTERFACTUAL or (oracle == "lane_invasion" and _slippery_or_windy(scenario, trace, f))
+    if verdict.fault is not Fault.OTHER and not ev.decided and replay is not None and settles:
         return counterfactual(scenario, misbehavior, replay, verdict)
     return verdict
+
+
+def _slippery_or_windy(scenario, trace, f: int, window_s: float = 2.0) -> bool:
+    """Wind in the weather, or friction under an axle below 0.5 in the ``window_s`` seconds before ``f``."""
+    if scenario.weather.wind > 0.0:
+        return True
+    k0 = max(f - int(window_s / trace.step_length), 0)
+    mu = np.concatenate([trace["mu_front"][k0:f + 1], trace["mu_rear"][k0:f + 1]])
+    mu = mu[~np.isnan(mu)]
+    return bool(len(mu)) and float(mu.min()) < 0.5
 
 
 def counterfactual(scenario, misbehavior, replay: Replay, verdict: Attribution) -> Attribution:
@@ -339,6 +358,33 @@ class _Event:
         return None
 
     # ------------------------------------------------------------------ standstills
+    def _leading_on(self, free: list[str], blocked: Mapping[str, str]) -> list[str]:
+        """The free lanes that are a way forward along the route: a lane that connects to the route's next
+        edge, or one the ego can pass the blocker on and still merge back (:data:`MERGE_ROOM` before the
+        end of a blocked lane that connects)."""
+        m = self.scenario.mission
+        route = self.rmap.route(m.start_edge, m.goal_edge) or ()
+        lane = str(self.trace["lane"][self.f])
+        if not lane or lane.startswith(":") or not self.rmap.has_lane(lane):
+            return free
+        edge = self.rmap.lane(lane).getEdge().getID()
+        if edge not in route or route.index(edge) + 1 >= len(route):
+            return free  # the goal edge (or off the route): any lane will do
+        nxt = route[route.index(edge) + 1]
+        leads = {fl for fl, _tl, _via in self.rmap.connections(edge, nxt)}
+        out = [l for l in free if l in leads]
+        if out or not free:
+            return out
+        for l, body in blocked.items():  # pass on a free lane, merge back into a blocked one that leads on
+            if l not in leads:
+                continue
+            tr = actor_track(self.trace, body)
+            g = self.rmap.geom(l)
+            pos, _ = g.project(float(tr.x[self.f]), float(tr.y[self.f]))
+            if g.length - pos >= MERGE_ROOM:
+                return free
+        return []
+
     def standstill(self) -> Attribution:
         trace, f = self.trace, self.f
         if self.v > 0.5:
@@ -352,6 +398,7 @@ class _Event:
         if blocked is None:
             return self.ego(f"the ego stood still with nothing blocking its way ({self.mb.oracle}/{self.mb.kind})")
         lanes, free, queue = blocked
+        free = self._leading_on(free, lanes)
         ev = {"lanes": {l: b for l, b in lanes.items()}, "free_lanes": free}
         own = lanes.get(str(trace["lane"][f]))
         if own is not None and actor_track(trace, own).kind == "pedestrian":

@@ -471,6 +471,8 @@ def _queue_blocked(trace, rmap, lane: str, f: int, bodies, track, dt) -> str | N
     lt = track(lead)
     if lt.kind == "pedestrian":
         return None
+    if float(np.nanmax(lt.speed[: f + 1], initial=0.0)) < 0.1:
+        return None  # a parked body, not a queue: it never moved
     if len(bodies) > 1 and bodies[1][0] - d0 < lt.length / 2 + 12.0 and _still(track(bodies[1][1]), f, dt):
         return f"{lead} stands behind the stationary {bodies[1][1]}"
     pos, _ = g.project(float(lt.x[f]), float(lt.y[f]))
