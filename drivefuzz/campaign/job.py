@@ -62,6 +62,8 @@ from drivefuzz.triage.store import FindingStore, TriageConfig
 from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
 
 STOP_FILE = "STOP"
+#: Draws of a population member that repeats its parent or a sibling before it is kept anyway.
+MAX_REDRAWS = 4
 
 
 def job_dir(out: Path, seed_index: int) -> Path:
@@ -234,10 +236,16 @@ class SeedJob:
                 update={"ads": cfg.ads})
             parent_hash = parent.content_hash()
             members: list[tuple[dict[str, Any], Any]] = []
+            seen = {parent_hash}
             for member in range(cfg.population):
                 t0 = time.perf_counter()
-                rng = random.Random(f"{cfg.seed}/{self.si}/{lin.number}/{lin.cycle}/{parent_hash}/{member}")
-                mut = mutator.successor(parent, cfg.strategy, rng, hint=lin.hint)
+                for redraw in range(MAX_REDRAWS):  # a member that repeats the parent or a sibling is drawn again
+                    rng = random.Random(f"{cfg.seed}/{self.si}/{lin.number}/{lin.cycle}/{parent_hash}/{member}"
+                                        + (f"/{redraw}" if redraw else ""))
+                    mut = mutator.successor(parent, cfg.strategy, rng, hint=lin.hint)
+                    if mut.scenario.content_hash() not in seen:
+                        break
+                seen.add(mut.scenario.content_hash())
                 rec = execute(f"{self.si}/{lin.number}/{lin.cycle}/{member}", mut.scenario, parent_hash,
                               mut.description, mut.retries, time.perf_counter() - t0, lin.number, lin.cycle, member,
                               baseline)
