@@ -348,3 +348,26 @@ def test_a_free_lane_counts_only_if_it_leads_on(blocker_pos, fault):
         assert v.evidence["free_lanes"] == []
     else:
         assert "D0D1_1" in v.reason
+
+
+def test_a_repeat_of_an_event_the_counterfactual_excused_runs_no_replay_again(tmp_path):
+    """The store files the event where the careful driver's replay put it, and remembers that the rules-only
+    signature leads there: the same event again is a hit, with no replay."""
+    from drivefuzz.triage.store import FindingStore, TriageConfig
+
+    leader = Actor(id="v2", kind="vehicle", nav="maneuver", start_lane="A0B0_1", start_pos=40.0, speed=7.0,
+                   dest_edge="B0C0", maneuvers=(Maneuver(time=6.0, action="speed", value=0.0),))
+    sc = scenario("A0B0_1", 10.0, "B0C0", 60.0, leader)
+    ex = execute(sc, ads=BlindADS(), oracles=oracles())
+    runs = []
+
+    def careful_fails_too(s):  # stands in for a replay in which the careful driver fails the same way
+        runs.append(s.ads.name)
+        return ex.misbehaviors, ex.trace
+
+    store = FindingStore(tmp_path, load_roadmap(NET), careful_fails_too, TriageConfig(reproduce=0))
+    first = store.triage(sc, list(ex.misbehaviors), ex.trace, "0/0/0/0", "collision")
+    assert first.new and first.fault == "other" and first.rel.startswith("incidents/") and runs == ["careful"]
+    again = store.triage(sc, list(ex.misbehaviors), ex.trace, "0/0/0/1", "collision")
+    assert (again.rel, again.new, again.executions, again.fault) == (first.rel, False, 0, "other")
+    assert runs == ["careful"]

@@ -35,6 +35,7 @@ from drivefuzz.storage import atomic_dir, atomic_write_json, atomic_write_text
 
 FINDINGS = "findings"
 INCIDENTS = "incidents"
+ALIASES = "triage-aliases"  # rules-only signature -> the folder its counterfactual filed it in
 
 
 def replay_script(ads_name: str = "ego") -> str:
@@ -101,9 +102,10 @@ class FindingStore:
             att = attribute(scenario, trace, m, self.rmap)
             sig_obj = signature(scenario, trace, m, self.rmap, att)
             sig_key, fault, sig = sig_obj.key, att.fault.value, _sig_dict(sig_obj)
-        seen = self._existing(sig_key)
+        seen = self._existing(sig_key) or self._alias(sig_key)
         if seen:
-            return Triaged(seen, sig_key, fault, False, 0)
+            return Triaged(seen, _key_of(seen), self._fault_of(seen, fault), False, 0)
+        rules_key = sig_key
         spent = 0
         if trace is not None and att.fault is Fault.EGO and self.cfg.counterfactual:
             def replay(sc):
@@ -118,6 +120,7 @@ class FindingStore:
                 sig_key, fault, sig = sig_obj.key, att2.fault.value, _sig_dict(sig_obj)
                 seen = self._existing(sig_key)
                 if seen:
+                    self._set_alias(rules_key, seen)
                     return Triaged(seen, sig_key, fault, False, spent)
             att = att2
         reproduction = None
@@ -148,7 +151,33 @@ class FindingStore:
             })
             atomic_write_text(tmp / "replay.sh", replay_script(scenario.ads.name))
             os.chmod(tmp / "replay.sh", 0o755)
+        if rules_key != sig_key:
+            self._set_alias(rules_key, rel)
         return Triaged(rel, sig_key, fault, True, spent)
+
+    # A rules-only signature whose counterfactual changed the verdict points to the folder it ended in, so
+    # that a repeat of the event does not replay the careful driver again.
+    def _fault_of(self, rel: str, default: str) -> str:
+        try:
+            att = json.loads((self.out / rel / "verdict.json").read_text()).get("attribution") or {}
+        except (OSError, ValueError):
+            return default
+        return att.get("fault", default) if isinstance(att, dict) else default
+
+    def _alias(self, key: str) -> str | None:
+        path = self.out / ALIASES / key
+        try:
+            rel = path.read_text().strip()
+        except OSError:
+            return None
+        return rel if (self.out / rel / "verdict.json").exists() else None
+
+    def _set_alias(self, key: str, rel: str) -> None:
+        atomic_write_text(self.out / ALIASES / key, rel + "\n")
+
+
+def _key_of(rel: str) -> str:
+    return rel.split("/", 1)[1].split("-", 1)[0]
 
 
 def _sig_dict(sig) -> dict[str, Any]:
