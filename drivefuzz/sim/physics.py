@@ -43,6 +43,14 @@ Model
   stable at any speed; the Coriolis coupling uses the updated lateral states (symplectic
   Euler, so a fast spin neither gains nor loses energy numerically); the pose is
   semi-implicit with the mid-point heading.
+
+  One step (:meth:`VehiclePhysics.step`): clip the inputs (``_clip_inputs``), fix the
+  step's constants (``_step_constants``), then each sub-step (``_substeps``), in order:
+  1. the rate-limited steering actuator, 2. the axle loads and peak tyre forces, 3. the
+  weight of the dynamic model, 4. ``_tyre_forces`` (rear lateral, drive and brakes),
+  5. ``_lateral_dynamics`` (front lateral, linearly implicit lateral/yaw update),
+  6. ``_velocities`` (longitudinal speed, kinematic blend), 7. the pose.  The small stages
+  1-3 and 7 are written out in ``_substeps``: a call per sub-step costs more than they do.
 * **Low speed**: between ``kinematic_blend_high`` (2 m/s) and ``kinematic_blend_low``
   (1 m/s) the lateral states are blended (smoothstep in the speed) into the kinematic
   single-track model ``r = vx tan(delta) / L``, ``vy = lr r`` (as the CommonRoad STD
@@ -66,6 +74,7 @@ not the CG (``VehicleParams.centre_to_cg`` ahead of it).
 from __future__ import annotations
 
 import math
+from math import atan, cos, hypot, sin, sqrt
 from dataclasses import dataclass
 
 from drivefuzz.scenario.model import EGO_LENGTH, EGO_WIDTH
@@ -263,6 +272,27 @@ def _clip01(v: float) -> float:
     return 0.0
 
 
+def _clip_inputs(steer, throttle, brake, mu_front, mu_rear, wind_force_lat) -> tuple[float, ...]:
+    """``(steer, throttle, brake, mu_front, mu_rear, wind)`` clipped as :meth:`VehiclePhysics.step` says."""
+    steer = float(steer)
+    if steer > 1.0:
+        steer = 1.0
+    elif steer < -1.0:
+        steer = -1.0
+    elif steer != steer:
+        steer = 0.0
+    throttle = _clip01(throttle)
+    brake = _clip01(brake)
+    muf = float(mu_front)
+    mur = float(mu_rear)
+    muf = _MU_MAX if muf > _MU_MAX else (muf if muf > _MU_MIN else _MU_MIN)  # NaN -> min
+    mur = _MU_MAX if mur > _MU_MAX else (mur if mur > _MU_MIN else _MU_MIN)
+    fw = float(wind_force_lat)
+    if not (-1e6 < fw < 1e6):
+        fw = 0.0 if fw != fw else math.copysign(1e6, fw)
+    return steer, throttle, brake, muf, mur, fw
+
+
 class VehiclePhysics:
     """Integrates the car; ``state`` is the only mutable data (it may be reassigned)."""
 
@@ -337,88 +367,79 @@ class VehiclePhysics:
         dt = float(dt)
         if not (dt > 0.0 and dt < 1e6):
             raise ValueError(f"dt must be > 0 and finite, got {dt!r}")
-        p = self.params
-        steer = float(steer)
-        if steer > 1.0:
-            steer = 1.0
-        elif steer < -1.0:
-            steer = -1.0
-        elif steer != steer:
-            steer = 0.0
-        throttle = _clip01(throttle)
-        brake = _clip01(brake)
-        muf = float(mu_front)
-        mur = float(mu_rear)
-        muf = _MU_MAX if muf > _MU_MAX else (muf if muf > _MU_MIN else _MU_MIN)  # NaN -> min
-        mur = _MU_MAX if mur > _MU_MAX else (mur if mur > _MU_MIN else _MU_MIN)
-        fw = float(wind_force_lat)
-        if not (-1e6 < fw < 1e6):
-            fw = 0.0 if fw != fw else math.copysign(1e6, fw)
+        steer, throttle, brake, muf, mur, fw = _clip_inputs(steer, throttle, brake, mu_front, mu_rear, wind_force_lat)
+        n = int(math.ceil(dt / self.params.max_substep - 1e-9))
+        if n < 1:
+            n = 1
+        s = self.state
+        x, y, psi, vx, vy, r, delta, sum_rvy, sum_vxr = self._substeps(
+            s, self._step_constants(steer, throttle, brake, muf, mur, fw, dt / n), n)
+        if psi > math.pi or psi < -math.pi:
+            psi = math.remainder(psi, _TWO_PI)
+        new = VehicleState(
+            x, y, psi, vx, vy, r, delta,
+            (vx - s.vx) / dt - sum_rvy / n,
+            (vy - s.vy) / dt + sum_vxr / n,
+        )
+        self.state = new
+        return new
 
+    def _step_constants(self, steer: float, throttle: float, brake: float, muf: float, mur: float,
+                        fw: float, h: float) -> tuple:
+        """What stays fixed over one step's sub-steps of ``h`` [s], grouped for the sub-step functions.
+
+        ``(d_target, d_rate, loads, blend, rear, front, drive, body, motion)``: the
+        steering target and rate [rad, rad per sub-step], then one tuple per sub-step
+        function (see their docstrings for the order).
+        """
+        p = self.params
         m = self._m
-        iz = self._iz
         lf = self._lf
         lr = self._lr
         L = self._L
-        hcg = self._hcg
         mg = self._mg
         fz_min = self._fz_min
-        fz_max = mg - fz_min
-        util_f = p.max_long_utilisation_front
-        util_r = p.max_long_utilisation_rear
         Cf = self._Cf
         Cr = self._Cr
-        Ef = self._Ef
-        Er = self._Er
         gr_lat_f = p.lateral_grip_front
         gr_lat = p.lateral_grip_rear
         Bf = self._kf / (Cf * muf * gr_lat_f)
         Br = self._kr / (Cr * mur * gr_lat)
-        drag = self._drag
-        rr = self._rr
-        dcg = self._dcg
-        fdf = p.front_drive_fraction
-        fmax = p.max_drive_force * throttle
-        pmax = p.max_power * throttle
-        fbrake = p.max_brake_decel * m * brake
         v_lo = p.kinematic_blend_low
         v_hi = p.kinematic_blend_high
-        v_span = v_hi - v_lo
         mu_avg = 0.5 * (muf + mur)
-        ls = p.tyre_load_sensitivity
         fzf0 = mg * lr / L
-        fzr0 = mg - fzf0
+        return (
+            steer * p.max_road_wheel_angle,
+            p.max_steer_rate * h,
+            (m, mg, self._hcg, lr, L, fz_min, mg - fz_min, p.tyre_load_sensitivity, fzf0, mg - fzf0, muf, mur),
+            (v_lo, v_hi, v_hi - v_lo),
+            (Br, Cr, self._Er, gr_lat, p.max_long_utilisation_rear, lr),
+            (Bf, Cf, self._Ef, gr_lat_f, lf),
+            (p.max_drive_force * throttle, p.max_power * throttle, p.front_drive_fraction,
+             p.max_brake_decel * m * brake, mg, p.max_long_utilisation_front),
+            (m, self._iz, lf, lr, fw, h),
+            (m, self._drag, self._rr, L, lr, self._kin_dvy * mu_avg * h, self._kin_dr * mu_avg * h, h),
+        )
 
-        n = int(math.ceil(dt / p.max_substep - 1e-9))
-        if n < 1:
-            n = 1
-        h = dt / n
-        kin_dvy = self._kin_dvy * mu_avg * h
-        kin_dr = self._kin_dr * mu_avg * h
-        d_target = steer * p.max_road_wheel_angle
-        d_rate = p.max_steer_rate * h
+    def _substeps(self, s: VehicleState, k: tuple, n: int) -> tuple:
+        """Integrate ``n`` sub-steps from ``s`` with the step constants ``k``.
 
-        s = self.state
-        x = s.x
-        y = s.y
-        psi = s.heading
-        vx = s.vx
-        vy = s.vy
-        r = s.yaw_rate
-        delta = s.road_wheel_angle
-        ax = s.ax
-        vx0 = vx
-        vy0 = vy
-        sum_rvy = 0.0
-        sum_vxr = 0.0
-        atan = math.atan
-        sin = math.sin
-        cos = math.cos
-        sqrt = math.sqrt
-        hypot = math.hypot
-
+        Returns ``(x, y, heading, vx, vy, yaw_rate, road_wheel_angle, sum_rvy, sum_vxr)``
+        (heading unwrapped; the sums of ``r vy`` and ``vx r`` over the sub-steps give the
+        step's mean accelerations).  The small stages are written out here: a call per
+        sub-step costs more than they do.
+        """
+        d_target, d_rate, loads, blend, rear, front, drive, body, motion = k
+        m, mg, hcg, lr, L, fz_min, fz_max, ls, fzf0, fzr0, muf, mur = loads
+        v_lo, v_hi, v_span = blend
+        dcg = self._dcg
+        h = motion[-1]
+        x, y, psi, vx, vy, r, delta, ax = s.x, s.y, s.heading, s.vx, s.vy, s.yaw_rate, s.road_wheel_angle, s.ax
+        sum_rvy = sum_vxr = 0.0
+        fyf = vy_d = r_d = 0.0  # the dynamic lateral states, only used while the dynamic weight is > 0
         for _ in range(n):
-            # -- steering actuator (rate limited)
+            # 1. steering actuator (rate limited)
             if delta < d_target:
                 delta += d_rate
                 if delta > d_target:
@@ -429,21 +450,19 @@ class VehiclePhysics:
                     delta = d_target
             cd = cos(delta)
             sd = sin(delta)
-
-            # -- axle loads with longitudinal load transfer (from the last sub-step's ax)
+            # 2. axle loads with the load transfer of the last sub-step's ax; peak tyre force
+            #    per axle (friction-ellipse radius), mu falling off with load
             fzf = (mg * lr - m * ax * hcg) / L
             if fzf < fz_min:
                 fzf = fz_min
             elif fzf > fz_max:
                 fzf = fz_max
             fzr = mg - fzf
-            # peak tyre force per axle (friction-ellipse radius); mu falls off with load
             t = 1.0 - ls * (fzf - fzf0) / fzf0
             capf = muf * fzf * (t if t > 0.2 else 0.2)
             t = 1.0 - ls * (fzr - fzr0) / fzr0
             capr = mur * fzr * (t if t > 0.2 else 0.2)
-
-            # -- blend weight dynamic / kinematic
+            # 3. weight of the dynamic model against the kinematic one (smoothstep in the speed)
             v = hypot(vx, vy)
             if v >= v_hi:
                 w = 1.0
@@ -452,176 +471,14 @@ class VehiclePhysics:
             else:
                 t = (v - v_lo) / v_span
                 w = t * t * (3.0 - 2.0 * t)
-
-            # -- rear lateral force (lateral priority on the rear axle: the rear brakes /
-            #    traction only get the friction the lateral force leaves, as EBD/ABS keep
-            #    the rear stable; the front is longitudinal-priority, see below)
+            # 4.-6. tyre forces, lateral dynamics, velocities
+            fyr, gr, fxf, pf, qf, pr_, qr = _tyre_forces(w, vx, vy, r, fzf, capf, capr, rear, drive)
             if w > 0.0:
-                vlat_r = vy - lr * r
-                Vr = vx if vx > 0.0 else -vx
-                if Vr < _V_SLIP_MIN:
-                    Vr = _V_SLIP_MIN
-                xb = -Br * atan(vlat_r / Vr)  # B * slip angle
-                if Er == 0.0:
-                    u = xb
-                    du = Br
-                else:
-                    u = xb - Er * (xb - atan(xb))
-                    du = Br * (1.0 - Er + Er / (1.0 + xb * xb))
-                phi = Cr * atan(u)
-                Dr = gr_lat * capr
-                fyr = Dr * sin(phi)
-                kr = Dr * Cr * cos(phi) * du / (1.0 + u * u)
-                if kr < 0.0:
-                    kr = 0.0
-                left = capr * capr - fyr * fyr
-                lim_r = util_r * sqrt(left) if left > 0.0 else 0.0
-            else:
-                fyr = 0.0
-                lim_r = util_r * capr
-            lim_f = util_f * capf
-
-            # -- longitudinal tyre forces (wheel frame, + = forward): drive and EBD brakes
-            if fmax > 0.0:
-                fd = pmax / vx if vx > 1.0 else pmax
-                if fd > fmax:
-                    fd = fmax
-            else:
-                fd = 0.0
-            dfa = fd * fdf
-            dra = fd - dfa
-            bfa = fbrake * fzf / mg
-            bra = fbrake - bfa
-            if vx >= 0.0:
-                nf = dfa - bfa
-                if nf > lim_f:
-                    nf = lim_f
-                elif nf < -lim_f:
-                    nf = -lim_f
-                nr = dra - bra
-                if nr > lim_r:
-                    nr = lim_r
-                elif nr < -lim_r:
-                    nr = -lim_r
-                fxf = nf  # signed force along the wheel
-                if nf >= 0.0:
-                    pf, qf = nf, 0.0
-                else:
-                    pf, qf = 0.0, -nf
-                if nr >= 0.0:
-                    pr_, qr = nr, 0.0
-                else:
-                    pr_, qr = 0.0, -nr
-            else:  # rolling backwards (only after a spin): drive and brakes both push forward
-                pf = dfa if dfa < lim_f else lim_f
-                qf = bfa if bfa < lim_f - pf else lim_f - pf
-                pr_ = dra if dra < lim_r else lim_r
-                qr = bra if bra < lim_r - pr_ else lim_r - pr_
-                fxf = pf + qf
-
-            fyf = 0.0
-            if w > 0.0:
-                # front slip angle (wheel frame; valid for any direction of travel)
-                vyf = vy + lf * r
-                vlong_f = vx * cd + vyf * sd
-                vlat_f = vyf * cd - vx * sd
-                Vf = vlong_f if vlong_f > 0.0 else -vlong_f
-                if Vf < _V_SLIP_MIN:
-                    Vf = _V_SLIP_MIN
-                # friction ellipse: the lateral capacity the longitudinal force leaves
-                uf = fxf / capf
-                Df = gr_lat_f * capf * sqrt(1.0 - uf * uf)
-                xb = -Bf * atan(vlat_f / Vf)
-                if Ef == 0.0:
-                    u = xb
-                    du = Bf
-                else:
-                    u = xb - Ef * (xb - atan(xb))
-                    du = Bf * (1.0 - Ef + Ef / (1.0 + xb * xb))
-                phi = Cf * atan(u)
-                fyf = Df * sin(phi)
-                kf = Df * Cf * cos(phi) * du / (1.0 + u * u)
-                if kf < 0.0:
-                    kf = 0.0
-                # lateral / yaw right-hand side (front forces in the body frame)
-                fyf_b = fyf * cd + fxf * sd
-                f1 = (fyf_b + fyr + fw) / m - vx * r
-                f2 = (lf * fyf_b - lr * fyr) / iz
-                # linearised tyre forces: d alpha / d vy (approximate, ignores d|vlong|)
-                gf = -cd * Vf / (Vf * Vf + vlat_f * vlat_f) * kf * cd
-                gr = -Vr / (Vr * Vr + vlat_r * vlat_r) * kr
-                j11 = (gf + gr) / m
-                j12 = (gf * lf - gr * lr) / m - vx
-                j21 = (lf * gf - lr * gr) / iz
-                j22 = (lf * lf * gf + lr * lr * gr) / iz
-                a11 = 1.0 - h * j11
-                a12 = -h * j12
-                a21 = -h * j21
-                a22 = 1.0 - h * j22
-                det = a11 * a22 - a12 * a21
-                if det > 0.05:
-                    dvy = h * (a22 * f1 - a12 * f2) / det
-                    dr = h * (a11 * f2 - a21 * f1) / det
-                else:  # (near-)singular linearisation: explicit Euler
-                    dvy = h * f1
-                    dr = h * f2
-                vy_d = vy + dvy
-                r_d = r + dr
-
-            # -- longitudinal: propulsion then no-overshoot resistances
-            a_n = (pf * cd + pr_) / m
-            if w > 0.0:
-                # Coriolis term with the *updated* r, vy (symplectic Euler: the body-frame
-                # velocity rotation neither gains nor loses energy, even in a fast spin)
-                a_n += w * (r_d * vy_d - fyf * sd / m)
-            a_res = (qf * cd + qr + drag * vx * vx + rr) / m
-            v1 = vx + h * a_n
-            if v1 > 0.0:
-                vx_new = v1 - h * a_res
-                if vx_new < 0.0:
-                    vx_new = 0.0
-            else:
-                vx_new = v1 + h * a_res
-                if vx_new > 0.0:
-                    vx_new = 0.0
-
-            # -- lateral: kinematic (friction-limited) and blend
-            if w < 1.0:
-                r_k = vx_new * sd / (cd * L)
-                dk = r_k * lr - vy
-                if dk > kin_dvy:
-                    dk = kin_dvy
-                elif dk < -kin_dvy:
-                    dk = -kin_dvy
-                vy_k = vy + dk
-                dk = r_k - r
-                if dk > kin_dr:
-                    dk = kin_dr
-                elif dk < -kin_dr:
-                    dk = -kin_dr
-                r_k = r + dk
-                if w > 0.0:
-                    vy_new = w * vy_d + (1.0 - w) * vy_k
-                    r_new = w * r_d + (1.0 - w) * r_k
-                else:
-                    vy_new = vy_k
-                    r_new = r_k
-            else:
-                vy_new = vy_d
-                r_new = r_d
-
-            ax = (vx_new - vx) / h - r_new * vy_new
-            if ax > 20.0:  # only feeds the load transfer
-                ax = 20.0
-            elif ax < -20.0:
-                ax = -20.0
-            vx = vx_new
-            vy = vy_new
-            r = r_new
+                fyf, vy_d, r_d = _lateral_dynamics(vx, vy, r, cd, sd, capf, fxf, fyr, gr, front, body)
+            vx, vy, r, ax = _velocities(w, vx, vy, r, cd, sd, pf, qf, pr_, qr, fyf, vy_d, r_d, motion)
             sum_rvy += r * vy
             sum_vxr += vx * r
-
-            # -- pose of the geometric centre (semi-implicit, mid-point heading)
+            # 7. pose of the geometric centre (semi-implicit, mid-point heading)
             if r != 0.0:
                 psi_mid = psi + 0.5 * h * r
                 psi += h * r
@@ -633,13 +490,194 @@ class VehiclePhysics:
                 vcy = vy - dcg * r
                 x += h * (vx * c - vcy * sn)
                 y += h * (vx * sn + vcy * c)
+        return x, y, psi, vx, vy, r, delta, sum_rvy, sum_vxr
 
-        if psi > math.pi or psi < -math.pi:
-            psi = math.remainder(psi, _TWO_PI)
-        new = VehicleState(
-            x, y, psi, vx, vy, r, delta,
-            (vx - vx0) / dt - sum_rvy / n,
-            (vy - vy0) / dt + sum_vxr / n,
-        )
-        self.state = new
-        return new
+
+# ---- the stages of one sub-step that VehiclePhysics._substeps calls -------------------------
+def _tyre_forces(w: float, vx: float, vy: float, r: float, fzf: float, capf: float, capr: float,
+                 rear: tuple, drive: tuple) -> tuple[float, ...]:
+    """The rear lateral force and the drive and brake forces of one sub-step [N].
+
+    Returns ``(Fy rear, d Fy rear / d vy [N s/m], front force along the wheel, front
+    propulsion, front resistance, rear propulsion, rear resistance)``.  Lateral priority on
+    the rear axle: the rear brakes and traction only get the friction the lateral force
+    leaves, as EBD/ABS keep the rear stable (the front is longitudinal-priority, see
+    :func:`_lateral_dynamics`); no lateral force while the dynamic weight ``w`` is 0.
+    Drive and EBD brakes are capped per axle (ideal ABS / TC); the propulsion and
+    resistance parts are >= 0.  ``rear``: ``(B, C, E, lateral grip, max long. utilisation,
+    lr)``; ``drive``: ``(max drive force x throttle, max power x throttle, front drive
+    fraction, brake force, m g, max long. utilisation front)``.
+    """
+    Br, Cr, Er, gr_lat, util_r, lr = rear
+    fmax, pmax, fdf, fbrake, mg, util_f = drive
+    if w > 0.0:
+        vlat_r = vy - lr * r
+        Vr = vx if vx > 0.0 else -vx
+        if Vr < _V_SLIP_MIN:
+            Vr = _V_SLIP_MIN
+        xb = -Br * atan(vlat_r / Vr)  # B * slip angle
+        if Er == 0.0:
+            u = xb
+            du = Br
+        else:
+            u = xb - Er * (xb - atan(xb))
+            du = Br * (1.0 - Er + Er / (1.0 + xb * xb))
+        phi = Cr * atan(u)
+        Dr = gr_lat * capr
+        fyr = Dr * sin(phi)
+        kr = Dr * Cr * cos(phi) * du / (1.0 + u * u)
+        if kr < 0.0:
+            kr = 0.0
+        gr = -Vr / (Vr * Vr + vlat_r * vlat_r) * kr  # d alpha / d vy (approximate, ignores d|vlong|)
+        left = capr * capr - fyr * fyr
+        lim_r = util_r * sqrt(left) if left > 0.0 else 0.0
+    else:
+        fyr = gr = 0.0
+        lim_r = util_r * capr
+    lim_f = util_f * capf
+    if fmax > 0.0:
+        fd = pmax / vx if vx > 1.0 else pmax
+        if fd > fmax:
+            fd = fmax
+    else:
+        fd = 0.0
+    dfa = fd * fdf
+    dra = fd - dfa
+    bfa = fbrake * fzf / mg
+    bra = fbrake - bfa
+    if vx >= 0.0:
+        nf = dfa - bfa
+        if nf > lim_f:
+            nf = lim_f
+        elif nf < -lim_f:
+            nf = -lim_f
+        nr = dra - bra
+        if nr > lim_r:
+            nr = lim_r
+        elif nr < -lim_r:
+            nr = -lim_r
+        pf, qf = (nf, 0.0) if nf >= 0.0 else (0.0, -nf)
+        pr_, qr = (nr, 0.0) if nr >= 0.0 else (0.0, -nr)
+        return fyr, gr, nf, pf, qf, pr_, qr  # nf: the signed force along the wheel
+    # rolling backwards (only after a spin): drive and brakes both push forward
+    pf = dfa if dfa < lim_f else lim_f
+    qf = bfa if bfa < lim_f - pf else lim_f - pf
+    pr_ = dra if dra < lim_r else lim_r
+    qr = bra if bra < lim_r - pr_ else lim_r - pr_
+    return fyr, gr, pf + qf, pf, qf, pr_, qr
+
+
+def _lateral_dynamics(vx: float, vy: float, r: float, cd: float, sd: float, capf: float, fxf: float,
+                      fyr: float, gr: float, front: tuple, body: tuple) -> tuple[float, float, float]:
+    """``(Fy front [N], vy [m/s], yaw rate [rad/s])`` of the dynamic model after one sub-step.
+
+    The front force is limited by the friction ellipse (the lateral capacity the
+    longitudinal force ``fxf`` leaves); the lateral and yaw equations are linearly
+    implicit (one Newton step of implicit Euler, tyre slopes clamped at >= 0; ``gr`` is
+    the rear's).  ``front``: ``(B, C, E, lateral grip, lf)``; ``body``: ``(m, Iz, lf, lr,
+    wind force, h)``.
+    """
+    Bf, Cf, Ef, gr_lat_f, lf = front
+    m, iz, lf, lr, fw, h = body
+    # front slip angle (wheel frame; valid for any direction of travel)
+    vyf = vy + lf * r
+    vlong_f = vx * cd + vyf * sd
+    vlat_f = vyf * cd - vx * sd
+    Vf = vlong_f if vlong_f > 0.0 else -vlong_f
+    if Vf < _V_SLIP_MIN:
+        Vf = _V_SLIP_MIN
+    uf = fxf / capf
+    Df = gr_lat_f * capf * sqrt(1.0 - uf * uf)
+    xb = -Bf * atan(vlat_f / Vf)
+    if Ef == 0.0:
+        u = xb
+        du = Bf
+    else:
+        u = xb - Ef * (xb - atan(xb))
+        du = Bf * (1.0 - Ef + Ef / (1.0 + xb * xb))
+    phi = Cf * atan(u)
+    fyf = Df * sin(phi)
+    kf = Df * Cf * cos(phi) * du / (1.0 + u * u)
+    if kf < 0.0:
+        kf = 0.0
+    # lateral / yaw right-hand side (front forces in the body frame)
+    fyf_b = fyf * cd + fxf * sd
+    f1 = (fyf_b + fyr + fw) / m - vx * r
+    f2 = (lf * fyf_b - lr * fyr) / iz
+    # linearised tyre forces: d alpha / d vy (approximate, ignores d|vlong|)
+    gf = -cd * Vf / (Vf * Vf + vlat_f * vlat_f) * kf * cd
+    j11 = (gf + gr) / m
+    j12 = (gf * lf - gr * lr) / m - vx
+    j21 = (lf * gf - lr * gr) / iz
+    j22 = (lf * lf * gf + lr * lr * gr) / iz
+    a11 = 1.0 - h * j11
+    a12 = -h * j12
+    a21 = -h * j21
+    a22 = 1.0 - h * j22
+    det = a11 * a22 - a12 * a21
+    if det > 0.05:
+        dvy = h * (a22 * f1 - a12 * f2) / det
+        dr = h * (a11 * f2 - a21 * f1) / det
+    else:  # (near-)singular linearisation: explicit Euler
+        dvy = h * f1
+        dr = h * f2
+    return fyf, vy + dvy, r + dr
+
+
+def _velocities(w: float, vx: float, vy: float, r: float, cd: float, sd: float, pf: float, qf: float,
+                pr_: float, qr: float, fyf: float, vy_d: float, r_d: float,
+                motion: tuple) -> tuple[float, float, float, float]:
+    """``(vx, vy, yaw rate, ax)`` after one sub-step: the longitudinal speed, then the lateral
+    states blended (weight ``w``) between the dynamic ones and the kinematic model.
+
+    Longitudinal: propulsion, then the resistances without overshoot (they stop the car,
+    never reverse it).  Kinematic: ``r = vx tan(delta) / L``, ``vy = lr r``, the pull
+    towards it limited by the friction.  ``ax`` [m/s^2] only feeds the next load transfer.
+    ``motion``: ``(m, drag factor, rolling resistance force, L, lr, max |d vy| and max |d r|
+    per sub-step, h)``.
+    """
+    m, drag, rr, L, lr, kin_dvy, kin_dr, h = motion
+    a_n = (pf * cd + pr_) / m
+    if w > 0.0:
+        # Coriolis term with the *updated* r, vy (symplectic Euler: the body-frame
+        # velocity rotation neither gains nor loses energy, even in a fast spin)
+        a_n += w * (r_d * vy_d - fyf * sd / m)
+    a_res = (qf * cd + qr + drag * vx * vx + rr) / m
+    v1 = vx + h * a_n
+    if v1 > 0.0:
+        vx_new = v1 - h * a_res
+        if vx_new < 0.0:
+            vx_new = 0.0
+    else:
+        vx_new = v1 + h * a_res
+        if vx_new > 0.0:
+            vx_new = 0.0
+    if w < 1.0:
+        r_k = vx_new * sd / (cd * L)
+        dk = r_k * lr - vy
+        if dk > kin_dvy:
+            dk = kin_dvy
+        elif dk < -kin_dvy:
+            dk = -kin_dvy
+        vy_k = vy + dk
+        dk = r_k - r
+        if dk > kin_dr:
+            dk = kin_dr
+        elif dk < -kin_dr:
+            dk = -kin_dr
+        r_k = r + dk
+        if w > 0.0:
+            vy_new = w * vy_d + (1.0 - w) * vy_k
+            r_new = w * r_d + (1.0 - w) * r_k
+        else:
+            vy_new = vy_k
+            r_new = r_k
+    else:
+        vy_new = vy_d
+        r_new = r_d
+    ax = (vx_new - vx) / h - r_new * vy_new
+    if ax > 20.0:
+        ax = 20.0
+    elif ax < -20.0:
+        ax = -20.0
+    return vx_new, vy_new, r_new, ax
