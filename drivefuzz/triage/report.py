@@ -171,11 +171,14 @@ def make_card(out: Path, row: FindingRow, plt, animate: bool = True) -> Card:
         card.notes.append(f"network not drawn ({type(exc).__name__}: {exc})")
     f = min(max(int(card.misbehavior.get("frame", trace.n_frames - 1)), 0), trace.n_frames - 1)
     card.other = other_party(trace, card.misbehavior, att if isinstance(att, dict) else {}, f)
-    scene = Scene(trace, f, card.other, rmap, scenario)
-    card.scene_png = scene.png(plt)
-    if animate:
-        card.gif = scene.gif(plt)
-    card.series_png = _series_png(plt, trace, f, card.other)
+    try:
+        scene = Scene(trace, f, card.other, rmap, scenario)
+        card.scene_png = scene.png(plt)
+        card.gif = scene.gif(plt) if animate else None
+        card.series_png = _series_png(plt, trace, f, card.other)
+    except Exception as exc:  # a trace that does not add up: the card keeps its text
+        plt.close("all")
+        card.notes.append(f"pictures failed ({type(exc).__name__}: {exc})")
     return card
 
 
@@ -533,19 +536,24 @@ def _table_html(rows: list[FindingRow]) -> str:
     return f"<table>{head}{body}</table>"
 
 
-def _card_html(c: Card) -> str:
-    r, m = c.row, c.misbehavior
+def _event_text(m: dict[str, Any]) -> str:
+    """When the oracle fired, with whom, and its details, on one line."""
     details = m.get("details") if isinstance(m.get("details"), dict) else {}
     what = ", ".join(f"{k} {v}" for k, v in details.items() if not isinstance(v, (dict, list)))
     when = f"at t = {float(m['time']):.2f} s (frame {m.get('frame')})" if "time" in m and int(m.get("frame", -1)) >= 0 else ""
+    who = f" with {', '.join(m.get('actors') or [])}" if m.get("actors") else ""
+    return f"{when}{who}{' · ' + what if what else ''}"
+
+
+def _card_html(c: Card) -> str:
+    r, m = c.row, c.misbehavior
     pics = (_img(c.scene_png, "image/png", f"top-down view of {r.folder}") + _img(c.gif, "image/gif", "the last seconds")
             + _img(c.series_png, "image/png", "time series"))
     notes = "".join(f'<p class="note">{_e(n)}</p>' for n in c.notes)
     kind = "incident" if r.incident else "finding"
     return (f'<div class="card {kind}" id="{_e(r.folder)}" data-folder="{_e(r.folder)}">'
             f"<h3>#{r.number} {_e(r.label)}</h3>"
-            f'<p class="meta"><b>{_e(r.verdict)}</b> {_e(when)}{" with " + _e(", ".join(m.get("actors") or [])) if m.get("actors") else ""}'
-            f"{' &middot; ' + _e(what) if what else ''}</p>"
+            f'<p class="meta"><b>{_e(r.verdict)}</b> {_e(_event_text(m))}</p>'
             f'<p class="meta">fault <span class="pill {_e(r.fault)}">{_e(r.fault)}</span> {_e(r.reason)}</p>'
             f'<p class="meta">{r.hits} hit(s) &middot; reproduced {_e(r.reproduction)} &middot; first seen {_e(_first_seen(r))}'
             f" &middot; folder <code>{_e(r.folder)}</code></p>"
@@ -587,8 +595,9 @@ def _table_md(rows: list[FindingRow]) -> list[str]:
     return out + [""]
 
 
-def render_markdown(info: CampaignInfo, findings: list[FindingRow], incidents: list[FindingRow], cards: list[Card],
+def render_markdown(info: CampaignInfo, findings: list[FindingRow], incidents: list[FindingRow], card_list: list[Card],
                     notes: list[str]) -> str:
+    cards = {c.row.folder: c for c in card_list}
     lines = [f"# drivefuzz report: {info.out.name}", "",
              f"{len(findings)} finding(s) and {len(incidents)} incident(s), one per signature. "
              "The pictures are in report.html.", "", *(f"> {n}" for n in notes), "", "## The campaign", ""]
@@ -596,7 +605,9 @@ def render_markdown(info: CampaignInfo, findings: list[FindingRow], incidents: l
     for title, rows in (("Findings (the ego's fault)", findings), ("Incidents (not the ego's fault)", incidents)):
         lines += [f"## {title}", "", *_table_md(rows)]
         for r in rows:
-            lines += [f"### #{r.number} {r.label}", "", f"- verdict: {r.verdict}, fault: {r.fault} ({r.reason})",
+            event = _event_text(cards[r.folder].misbehavior) if r.folder in cards else ""
+            lines += [f"### #{r.number} {r.label}", "", f"- verdict: {r.verdict} {event}".rstrip(),
+                      f"- fault: {r.fault} ({r.reason})",
                       f"- {r.hits} hit(s); reproduced {r.reproduction}; first seen {_first_seen(r)}",
                       f"- folder: `{r.folder}`", "", "```sh", r.replay, "```", ""]
     return "\n".join(lines)
