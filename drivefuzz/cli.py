@@ -743,5 +743,44 @@ def ads_cmd():
             click.echo(f"    {key} = {f.default!r}")
 
 
+# ------------------------------------------------------------------ findings, report
+@main.command("findings")
+@click.argument("out", type=click.Path())
+@click.option("--json", "as_json", is_flag=True, help="Print the rows as a JSON list.")
+@click.option("--incidents", is_flag=True, help="List the incidents (not the ego's fault) too.")
+@handle_errors
+def findings_cmd(out, as_json, incidents):
+    """List a campaign's findings, numbered in the order they were first found (exit 0: a listing)."""
+    from drivefuzz.triage.table import finding_rows, format_table, read_executions, check_campaign_dir
+
+    execs = read_executions(check_campaign_dir(out))
+    rows = finding_rows(out, executions=execs)
+    extra = finding_rows(out, incidents=True, executions=execs) if incidents else []
+    if as_json:
+        click.echo(json.dumps([r.as_json() for r in rows + extra], indent=2))
+        return
+    click.echo(format_table(rows, "findings (the ego's fault)"))
+    if incidents:
+        click.echo(format_table(extra, "incidents (not the ego's fault)"))
+
+
+@main.command("report")
+@click.argument("out", type=click.Path())
+@click.option("-o", "html_out", type=click.Path(dir_okay=False), help="The HTML file [OUT/report.html]; report.md beside it.")
+@click.option("--max-cards", type=click.IntRange(0, 1000), default=50, show_default=True, help="Finding cards at most.")
+@click.option("--no-animation", is_flag=True, help="Leave out the animations (faster).")
+@handle_errors
+def report_cmd(out, html_out, max_cards, no_animation):
+    """Write one self-contained HTML report of campaign OUT (and its Markdown twin)."""
+    from drivefuzz.triage.report import write_report
+    from drivefuzz.triage.table import check_campaign_dir
+
+    check_campaign_dir(out)
+    if html_out:
+        _writable_dir(Path(html_out).parent, "-o")
+    html_path, md_path = write_report(out, html_out, max_cards=max_cards, animate=not no_animation)
+    click.echo(f"wrote {html_path} and {md_path}")
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

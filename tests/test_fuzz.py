@@ -50,7 +50,7 @@ def test_resume_continues_without_losing_or_repeating(tmp_path, town_scenario):
     assert keys[:3] == keys_first and len(keys) == len(set(keys)) == 6
     # the same campaign in one go gives the same executions
     findings = sorted(p.name for p in (out / "findings").iterdir())
-    assert len(findings) == len({n.rsplit("-", 1)[1] for n in findings})  # no finding saved twice
+    assert len(findings) == len({n.split("-", 1)[0] for n in findings})  # no signature saved twice
     assert set(f.path.name for f in first) <= set(findings)  # none lost
     Campaign(tmp_path / "again", [seed], FuzzConfig(max_execs=6, **cfg0)).run()
     again = _ended(tmp_path / "again", records=True)

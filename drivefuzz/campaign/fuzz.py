@@ -294,8 +294,10 @@ class Campaign:
                 self.out_of_budget()
         if self.stop_reason and not self.stop_requested and not self.failed_jobs:
             atomic_write_json(self.out / FINISHED, {"reason": self.stop_reason, "executions": self.progress.execs})
-        self.findings.sort(key=lambda f: f.key)  # in the order they were found (seed, lineage, cycle, member)
-        self.incidents.sort(key=lambda f: f.key)
+        # in the order they were first hit (as `drivefuzz findings` and the report number them)
+        first = {rel: i for i, rel in enumerate(hits)}
+        self.findings.sort(key=lambda f: first.get(str(f.path.relative_to(self.out)), len(first)))
+        self.incidents.sort(key=lambda f: first.get(str(f.path.relative_to(self.out)), len(first)))
         return self.findings
 
     def _run_here(self, pending: list[int]) -> None:
