@@ -80,3 +80,16 @@ def test_the_state_round_trips_through_json():
     s.start_lineage(random.Random(1))
     again = Schedule.from_json(ScheduleConfig(), json.loads(json.dumps(s.to_json())), "risk")
     assert again.to_json() == s.to_json()
+
+
+def test_a_lineage_that_found_something_gives_its_energy_away():
+    s = Schedule(ScheduleConfig(fresh_share=0.0, found_penalty=3))
+    s.start_lineage(random.Random(0))
+    s.cycle_done(0.9, "corpus/a", None, False, False)
+    s.cycle_done(0.95, "corpus/b", None, True, False)  # b found something: the lineage ends
+    assert s.lineage is None
+    assert [e.picks for e in s.corpus] == [3, 3]
+    random_mode = Schedule(ScheduleConfig(), mode="random")
+    random_mode.start_lineage(random.Random(0))
+    random_mode.cycle_done(0.9, "corpus/a", None, True, False)
+    assert [e.picks for e in random_mode.corpus] == [0]  # the baseline ignores what was found

@@ -7,7 +7,8 @@ decides where lineages start and when they end:
 - A lineage ends (it *yields*) after ``ScheduleConfig.max_cycles`` cycles, or after ``patience`` cycles in a
   row that did not raise its best feedback value, or at a finding (unless the campaign continues after
   findings). Lineages that keep raising risk therefore get more cycles: their energy.
-- Every successor that raised its lineage's best value enters the corpus.
+- Every successor that raised its lineage's best value enters the corpus. When a lineage ends at a finding,
+  its entries (and the one it started from) lose energy: they lead to a bug already found.
 - A new lineage starts from the seed (a fresh one) with probability ``fresh_share``, or when the corpus is
   empty; otherwise from a corpus entry drawn with weight ``(rank_weight + risk rank) / (1 + picks)``: risky
   entries are preferred, and an entry that has been tried often makes way for the others.
@@ -36,6 +37,8 @@ class ScheduleConfig(BaseModel):
     fresh_share: float = Field(default=0.3, ge=0.0, le=1.0, description="share of lineages started from the seed")
     min_gain: float = Field(default=1e-6, ge=0.0, description="a rise of the best value smaller than this is none")
     max_corpus: int = Field(default=200, ge=1, description="corpus entries kept per seed (the riskiest)")
+    found_penalty: int = Field(default=3, ge=0, description="picks added to the entries of a lineage that found "
+                               "something (its energy goes to lineages that have not)")
 
 
 @dataclass
@@ -124,6 +127,10 @@ class Schedule:
         go_on = lin.cycle < self.cfg.max_cycles and (self.mode == "random" or lin.stagnant < self.cfg.patience)
         if found and not continue_after_finding:
             go_on = False
+            if self.mode != "random":  # its entries lead to a bug already found: they make way for the others
+                for e in self.corpus:
+                    if e.lineage == lin.number or e.ref == lin.start:
+                        e.picks += self.cfg.found_penalty
         if not go_on:
             self.lineage = None
         return go_on
