@@ -1,0 +1,243 @@
+"""Where the ego will be, and where an actor must start to meet it: the mutator's route geometry.
+
+:class:`RoutePlacement` is a mixin of :class:`drivefuzz.search.mutate.Mutator` (it uses its road map
+``rmap``, configuration ``cfg`` and ``_route``): the ego's expected motion along its route (a speed profile
+of how the reference ADS drives the empty road), the junction passages and conflict points of the route,
+and the placement of linear actors timed to meet the ego there. The fairness rules and the situation
+catalogue use the same profile. Never imports libsumo.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+
+import numpy as np
+from shapely.geometry import LineString, Point
+
+from drivefuzz.scenario import Scenario
+from drivefuzz.scenario.roadmap import PASSENGER
+from drivefuzz.search.fairness import lane_limit
+
+
+class RoutePlacement:
+    def _road_side(self, lane_id: str) -> float:
+        """+1 when the rest of the road lies to the left of a walker's lane (a right-hand sidewalk, or the
+        rightmost lane of a road without sidewalks), else -1."""
+        lane = self.rmap.lane(lane_id)
+        road = [l.getIndex() for l in lane.getEdge().getLanes() if l.allows(PASSENGER) and l.getID() != lane_id]
+        return 1.0 if not road or lane.getIndex() < min(road) else -1.0
+
+    def _road_width(self, lane_id: str) -> float:
+        """[m] across every lane of ``lane_id``'s edge except ``lane_id`` itself, plus half of it."""
+        lane = self.rmap.lane(lane_id)
+        return sum(l.getWidth() for l in lane.getEdge().getLanes() if l.getID() != lane_id) + lane.getWidth() / 2
+
+    def _ego_profile(self, sc: Scenario) -> tuple[np.ndarray, np.ndarray]:
+        """The ego's expected (distance [m] from its start, time [s]) along its route, at 1 m steps.
+
+        A speed cap per metre (``ego_speed_share`` of the limit; in junctions also ``sqrt(ego_lat_accel /
+        curvature)``), then a forward pass accelerating at ``ego_accel`` and a backward pass braking at
+        ``ego_decel``: how the reference ADS drives an empty road. Used only to time linear actors."""
+        m = sc.mission
+        key = (m.start_lane, m.start_pos, m.goal_edge, m.start_speed)
+        if key in self._profile_cache:
+            return self._profile_cache[key]
+        cfg, rmap, route = self.cfg, self.rmap, self._route(sc)
+        caps: list[np.ndarray] = []
+        lane = m.start_lane
+        index = rmap.lane(lane).getIndex()
+        for i, e in enumerate(route):
+            length = rmap.edge(e).getLength() - (m.start_pos if i == 0 else 0.0)
+            caps.append(np.full(max(int(length), 1), cfg.ego_speed_share * rmap.edge(e).getSpeed()))
+            if i + 1 < len(route):
+                conns = rmap.connections(e, route[i + 1])
+                if not conns:
+                    continue
+                fl, _tl, via = min(conns, key=lambda c: abs(rmap.lane(c[0]).getIndex() - index))
+                chain = self._internal_chain(via)
+                length = sum(rmap.geom(lid).length for lid in chain)
+                pts = np.vstack([rmap.geom(fl).pts[-2:]] + [rmap.geom(lid).pts for lid in chain]
+                                + [rmap.geom(_tl).pts[:2]])
+                heading = np.unwrap(np.arctan2(*np.diff(pts, axis=0).T[::-1]))
+                k = abs(float(heading[-1] - heading[0])) / max(length, 1.0)  # mean curvature [1/m]
+                v = cfg.ego_speed_share * rmap.geom(chain[0]).speed if chain else caps[-1][-1]
+                if k > 1e-4:
+                    v = min(v, math.sqrt(cfg.ego_lat_accel / k))
+                caps.append(np.full(max(int(round(length)), 1), v))
+        cap = np.maximum(np.concatenate(caps), 0.5)
+        v = np.empty(len(cap) + 1)
+        v[0] = min(m.start_speed, cap[0])
+        for j in range(len(cap)):  # forward: accelerate
+            v[j + 1] = min(cap[j], math.sqrt(v[j] ** 2 + 2 * cfg.ego_accel))
+        for j in range(len(cap) - 1, -1, -1):  # backward: brake ahead of slow parts
+            v[j] = min(v[j], math.sqrt(v[j + 1] ** 2 + 2 * cfg.ego_decel))
+        dt = 2.0 / np.maximum(v[:-1] + v[1:], 1e-3)  # 1 m at the mean speed
+        prof = (np.arange(len(cap) + 1, dtype=float), np.concatenate([[0.0], np.cumsum(dt)]))
+        self._profile_cache[key] = prof
+        return prof
+
+    def _ego_eta(self, sc: Scenario, dist: float) -> float:
+        """[s] until the ego's front bumper is expected ``dist`` metres along its route."""
+        s, t = self._ego_profile(sc)
+        return float(np.interp(dist, s, t))
+
+    def _ego_progress(self, sc: Scenario, t: float) -> float:
+        """[m] the ego's front bumper is expected to have covered at time ``t`` [s]."""
+        s, ts = self._ego_profile(sc)
+        return float(np.interp(t, ts, s))
+
+    def _via_length(self, from_lane: str, to_lane: str) -> float:
+        """[m] through the junction from the end of ``from_lane`` to the start of ``to_lane`` (0 if direct)."""
+        for c in self.rmap.lane(from_lane).getOutgoing():
+            if c.getToLane().getID() == to_lane and c.getViaLaneID():
+                return sum(self.rmap.lane(v).getLength() for v in self._internal_chain(c.getViaLaneID()))
+        return 0.0
+
+    def _upstream(self, lane_id: str, pos: float, back: float,
+                  rng: random.Random) -> tuple[str, float, float] | None:
+        """(lane, pos, driving distance [m]) about ``back`` metres of driving upstream of (lane_id, pos), through
+        incoming passenger lanes and the junctions between them; at least ``back`` (an actor never stands
+        inside a junction). None when the road ends first."""
+        covered = 0.0
+        for _ in range(4):
+            if pos - back >= 1.0:
+                new_pos = round(min(pos - back, self.rmap.lane(lane_id).getLength() - 0.5), 2)
+                return lane_id, new_pos, covered + pos - new_pos
+            ins = [l for l in self.rmap.lane(lane_id).getIncoming()
+                   if l.getEdge().getFunction() == "" and l.allows(PASSENGER)]
+            if not ins:
+                return None
+            lane = rng.choice(ins)
+            via = self._via_length(lane.getID(), lane_id)
+            covered += pos + via
+            back = max(back - pos - via, 0.0)
+            lane_id, pos = lane.getID(), lane.getLength()
+        return None
+
+    def _rear_place(self, sc: Scenario, rng: random.Random, speed: float):
+        """Behind the ego on its own lane, close enough that at ``speed`` it catches the accelerating ego."""
+        ego_len = 4.6  # [m] the reference car's body; only sharpens the timing
+        # largest front-to-front gap [m] from which the actor still reaches the ego's rear bumper within 30 s
+        g_max = max(speed * t - self._ego_progress(sc, t) + ego_len for t in (0.25 * k for k in range(1, 121)))
+        g_min = self.cfg.min_separation + ego_len / 2
+        if g_max < g_min:
+            return None
+        gap = rng.uniform(g_min, min(g_max, g_min + self.cfg.behind_range))
+        m = sc.mission
+        placed = self._upstream(m.start_lane, m.start_pos, gap, rng)
+        if placed is None or placed[2] > g_max:
+            return None
+        lane, pos, gap = placed
+        dest = self._route(sc)[-1]
+        actor_route = self.rmap.route(self.rmap.lane(lane).getEdge().getID(), dest)
+        if not actor_route or m.start_edge not in actor_route:
+            return None
+        return lane, pos, speed, dest, f", {gap:.1f} m behind the ego"
+
+    def _internal_chain(self, via: str) -> list[str]:
+        """Every internal lane of a junction passage that starts with ``via`` (also past internal stop lines)."""
+        chain: list[str] = []
+        while via and via not in chain:
+            chain.append(via)
+            nxt = ""
+            for c in self.rmap.lane(via).getOutgoing():
+                to = c.getToLane()
+                nxt = to.getID() if to.getEdge().getFunction() == "internal" else (c.getViaLaneID() or "")
+                break
+            via = nxt
+        return chain
+
+    def _passage(self, from_lane: str, to_lane: str, via: str) -> LineString:
+        """The centre line through a junction: the internal lanes of a connection, then ``to_lane``'s first metres."""
+        pts: list = [tuple(self.rmap.geom(from_lane).pts[-1])]
+        for lid in self._internal_chain(via):
+            pts.extend(map(tuple, self.rmap.geom(lid).pts))
+        g = self.rmap.geom(to_lane)
+        pts.extend(map(tuple, g.pts[g.cum < 15.0]))
+        pts.append(self.rmap.geom(to_lane).position(min(15.0, g.length))[:2])
+        return LineString(pts)
+
+    def _conflicts(self, sc: Scenario) -> list[tuple[int, float, str, str, float, str, str, str]]:
+        """Ways to cross the ego's path at the junctions of its route within ``conflict_range``:
+        (route index of the junction's incoming edge, ego distance [m] from its start to the conflict point,
+        actor lane entering the junction, actor destination edge, actor distance [m] from that lane's end to
+        the conflict point, junction id, the ego's and the actor's link states: 'M' major, 'm' minor, 's'
+        stop, 'w' all-way stop, 'o' signalised...). Cached per mission."""
+        m = sc.mission
+        key = (m.start_lane, m.start_pos, m.goal_edge)
+        if key in self._conflict_cache:
+            return self._conflict_cache[key]
+        rmap, route = self.rmap, self._route(sc)
+        out = []
+        s = -m.start_pos
+        ego_index = self.rmap.lane(m.start_lane).getIndex()
+        for i, e in enumerate(route[:-1]):
+            s += rmap.edge(e).getLength()
+            if s > self.cfg.conflict_range:
+                break
+            conns = rmap.connections(e, route[i + 1])
+            if not conns:
+                continue
+            fl, tl, via = min(conns, key=lambda c: abs(rmap.lane(c[0]).getIndex() - ego_index))
+            ego_state = next((c.getState() for c in rmap.lane(fl).getOutgoing() if c.getToLane().getID() == tl), "")
+            ego_line = self._passage(fl, tl, via)
+            ego_zone = ego_line.buffer(2.0)  # closer centre lines than this: the bodies meet
+            node = rmap.edge(e).getToNode()
+            for inc in node.getIncoming():
+                if inc.getID() == e or inc.getFunction() != "":
+                    continue
+                for lane in inc.getLanes():
+                    if not lane.allows(PASSENGER):
+                        continue
+                    for c in lane.getOutgoing():
+                        to = c.getToLane()
+                        if to.getEdge().getFunction() != "" or to.getEdge().getToNode() is inc.getFromNode():
+                            continue
+                        line = self._passage(lane.getID(), to.getID(), c.getViaLaneID() or "")
+                        hit = line.intersection(ego_zone)
+                        if hit.is_empty:
+                            continue
+                        d_actor = min(line.project(Point(xy)) for xy in _coords(hit))
+                        pt = line.interpolate(d_actor)
+                        out.append((i, s + ego_line.project(pt), lane.getID(), to.getEdge().getID(), d_actor,
+                                    node.getID(), ego_state, c.getState()))
+        self._conflict_cache[key] = out
+        return out
+
+    def _cross_place(self, sc: Scenario, rng: random.Random, speed: float):
+        """On another approach to a junction of the ego's route, timed to reach the point where its path
+        crosses (or merges into) the ego's just as the ego gets there: a side impact if nobody yields."""
+        # a reckless driver crosses only where it has the right of way anyway: the ego must yield to it there
+        options = [o for o in self._conflicts(sc) if o[6] in ("m", "s", "w") and o[7] == "M"]
+        if not options:
+            return None
+        i, s_c, lane_id, dest, d_c, node, _, _ = rng.choice(options)
+        # the ego's front reaches the conflict point at about t_c (the profile runs a little early, and a
+        # reference ADS that sees the actor in its path first simply stops): arrive while the ego's body is there
+        t_c = self._ego_eta(sc, s_c)
+        t_meet = t_c + rng.uniform(0.0, 1.2)
+        rmap = self.rmap
+        lane_len = rmap.lane(lane_id).getLength()
+        back = speed * t_meet - d_c
+        placed = self._upstream(lane_id, lane_len, back, rng) if back > 0 else None
+        if placed is None:  # not enough road upstream: start as far back as possible, slower
+            placed = (lane_id, 1.0, lane_len - 1.0)
+        speed = round((placed[2] + d_c) / max(t_meet, 0.1), 2)  # the junctions on the way make it longer
+        limit = min(lane_limit(self, lane_id) * self.cfg.vehicle_speed_share[1], self.cfg.max_vehicle_speed)
+        if not 0.3 * limit <= speed <= limit:
+            return None
+        lane, pos, _ = placed
+        actor_route = rmap.route(rmap.lane(lane).getEdge().getID(), dest)
+        if not actor_route or rmap.lane(lane_id).getEdge().getID() not in actor_route:
+            return None
+        return lane, pos, speed, dest, f", crosses the ego's path at {node} at ~{t_meet:.1f} s"
+
+
+def _coords(geom) -> list[tuple[float, float]]:
+    """Every vertex of a shapely geometry (collections and multi-parts included)."""
+    if hasattr(geom, "geoms"):
+        return [xy for g in geom.geoms for xy in _coords(g)]
+    if geom.geom_type == "Polygon":
+        return list(geom.exterior.coords)
+    return list(geom.coords)
