@@ -181,7 +181,7 @@ class SeedJob:
         (single pass: the seed's one lineage ended), "stopped" or "superseded"."""
         from drivefuzz.scenario.roadmap import load_roadmap
         from drivefuzz.search.mutate import Mutator
-        from drivefuzz.search.schedule import Schedule, pick_successor
+        from drivefuzz.search.schedule import Schedule
 
         cfg = self.cfg
         seed_sc = self.seed
@@ -253,20 +253,26 @@ class SeedJob:
                     return rec
                 members.append((rec, mut.scenario))
             found = any(rec["finding"] for rec, _ in members)
-            # findings do not become parents: the lineage goes on from the riskiest mutant that passed
-            candidates = [(rec, sc) for rec, sc in members
-                          if not rec["finding"] and not rec.get("incident") and rec["risk"] is not None]
-            values = [_feedback_value(rec, cfg.feedback) for rec, _ in candidates]
-            pick = pick_successor(values, cfg.feedback,
-                                  random.Random(f"{cfg.seed}/{self.si}/{lin.number}/{lin.cycle}/{parent_hash}/select"))
-            ref = hint = value = None
-            if pick is not None:
-                rec, successor = candidates[pick]
-                ref, hint, value = self._corpus_ref(successor), rec.get("hint"), values[pick]
+            ref, hint, value = self._select(members, random.Random(
+                f"{cfg.seed}/{self.si}/{lin.number}/{lin.cycle}/{parent_hash}/select"))
             schedule.cycle_done(value, ref, hint, found, cfg.continue_after_finding)
             self._checkpoint(schedule, ckpt["baseline"])
             if schedule.lineage is None:
                 return "done" if cfg.one_lineage_per_seed else "yielded"
+
+    def _select(self, members: list[tuple[dict[str, Any], Any]], rng: random.Random):
+        """(corpus folder, riskiest actor, feedback value) of the member that becomes the next scenario, or
+        Nones. Findings and incidents do not become parents: the lineage goes on from a mutant that passed."""
+        from drivefuzz.search.schedule import pick_successor
+
+        candidates = [(rec, sc) for rec, sc in members
+                      if not rec["finding"] and not rec.get("incident") and rec["risk"] is not None]
+        values = [_feedback_value(rec, self.cfg.feedback) for rec, _ in candidates]
+        pick = pick_successor(values, self.cfg.feedback, rng)
+        if pick is None:
+            return None, None, None
+        rec, successor = candidates[pick]
+        return self._corpus_ref(successor), rec.get("hint"), values[pick]
 
     def _execute_into(self, rec: dict[str, Any], runner, store, scenario, key: str, t_mutate: float,
                       baseline) -> None:
