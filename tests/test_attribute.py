@@ -235,15 +235,22 @@ def test_counterfactual_same_failure_makes_it_other():
 
 
 def test_counterfactual_other_failure_keeps_the_verdict():
+    """A careful driver that got past the event (failing only later, differently) avoided it; one that failed
+    before it got there (or whose replay did not run) says nothing: unclear."""
     calls = []
 
-    def fake(sc):
-        calls.append(sc.ads.name)
-        return (Misbehavior("collision", "vehicle", 5, 0.25, (0.0, 0.0), ("someone_else",)),), None
+    def fake(at: float, trace=object()):
+        def run(sc):
+            calls.append(sc.ads.name)
+            return (Misbehavior("collision", "vehicle", 5, at, (0.0, 0.0), ("someone_else",)),), trace
+        return run
 
     m = Misbehavior("collision", "vehicle", 5, 0.25, (0.0, 0.0), ("v2",))
-    v = counterfactual(scenario("A0B0_1", 10.0, "B0C0", 40.0), m, fake, Attribution(Fault.EGO, "x"))
-    assert calls == ["careful"] and v.fault is Fault.EGO
+    sc = scenario("A0B0_1", 10.0, "B0C0", 40.0)
+    v = counterfactual(sc, m, fake(0.5), Attribution(Fault.EGO, "x"))
+    assert calls == ["careful"] and v.fault is Fault.EGO and "avoided" in v.reason
+    assert counterfactual(sc, m, fake(0.1), Attribution(Fault.EGO, "x")).fault is Fault.UNCLEAR
+    assert counterfactual(sc, m, fake(0.5, None), Attribution(Fault.EGO, "x")).fault is Fault.UNCLEAR
 
 
 # ------------------------------------------------------------------ pieces

@@ -306,12 +306,14 @@ class SeedJob:
         else:  # the simulator crashed or hung, or a plugin raised: a finding of its own kind
             m = Misbehavior(oracle=out.status, kind=out.error_type or out.status, frame=-1, time=0.0,
                             position=(0.0, 0.0), details={"detail": out.detail})
+            t0 = time.perf_counter()
             filed = store.triage(scenario, [m], None, key, out.status,
                                  {"error": {"status": out.status, "type": out.error_type,
                                             "detail": out.detail, "traceback": out.traceback}})
+            timings["triage"] = time.perf_counter() - t0
             rec.update(termination=out.status, frames=0, wall_time=round(out.wall_time, 4),
                        verdict=f"{m.oracle}/{m.kind}", finding=filed.rel, signature=filed.signature, fault="ego")
-        timings["storage"] = time.perf_counter() - t_store
+        timings["storage"] = time.perf_counter() - t_store - timings.get("triage", 0.0)  # triage has its own key
         rec["timings"] = {k: round(v, 6) for k, v in timings.items()}
 
 

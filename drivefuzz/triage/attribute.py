@@ -139,14 +139,16 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
     # lane keeping on a dry, calm road, its failing too says nothing about avoidability (the rules decide);
     # lane keeping lost to ice or wind may have been unavoidable, which the replay can show
     oracle = misbehavior.oracle
-    settles = oracle not in NO_COUNTERFACTUAL or (oracle == "lane_invasion" and _slippery_or_windy(scenario, trace, f))
+    settles = (oracle not in NO_COUNTERFACTUAL or ev.replay_may_settle
+               or (oracle == "lane_invasion" and _slippery_or_windy(scenario, trace, f)))
     if verdict.fault is not Fault.OTHER and not ev.decided and replay is not None and settles:
         return counterfactual(scenario, misbehavior, replay, verdict)
     return verdict
 
 
-def _slippery_or_windy(scenario, trace, f: int, window_s: float = 2.0) -> bool:
-    """Wind in the weather, or friction under an axle below 0.5 in the ``window_s`` seconds before ``f``."""
+def _slippery_or_windy(scenario, trace, f: int, window_s: float = 6.0) -> bool:
+    """Wind in the weather, or friction under an axle below 0.5 in the ``window_s`` seconds before ``f`` (a car
+    that slid on ice may leave its lane seconds later, as its tyres regain grip)."""
     if scenario.weather.wind > 0.0:
         return True
     k0 = max(f - int(window_s / trace.step_length), 0)
@@ -167,6 +169,11 @@ def counterfactual(scenario, misbehavior, replay: Replay, verdict: Attribution) 
         m = same[0]
         return Attribution(Fault.OTHER, f"a careful driver could not avoid it either ({m.oracle}/{m.kind} "
                                         f"at {m.time:.1f} s)", evidence)
+    earlier = [m for m in others if m.time <= misbehavior.time]
+    if _trace is None or earlier:  # it never got there: the replay says nothing about this event
+        what = f"{earlier[0].oracle}/{earlier[0].kind} at {earlier[0].time:.1f} s" if earlier else "did not run"
+        return Attribution(Fault.UNCLEAR, verdict.reason + f"; the careful driver's replay failed first ({what})",
+                           evidence)
     return Attribution(verdict.fault, verdict.reason + "; a careful driver avoided it", evidence)
 
 
@@ -178,6 +185,8 @@ class _Event:
         #: an ``ego`` verdict from a rule that saw the ego's own fault (the careful driver would
         #: share it or never meet it): no counterfactual
         self.decided = False
+        #: a verdict of an oracle in NO_COUNTERFACTUAL that the replay may still settle
+        self.replay_may_settle = False
         self.v = float(trace["speed"][f])
         self.base = {"frame": f, "time": round(float(trace["t"][f]), 3), "ego_speed": self.v,
                      "ego_lane": str(trace["lane"][f])}
@@ -396,6 +405,7 @@ class _Event:
             return self.ego(f"the ego did not reach its goal in time ({self.mb.oracle}/{self.mb.kind})")
         blocked = blocked_lanes(trace, self.rmap, f)
         if blocked is None:
+            self.replay_may_settle = True  # the rules may have missed a blocker (mid-turn in a junction)
             return self.ego(f"the ego stood still with nothing blocking its way ({self.mb.oracle}/{self.mb.kind})")
         lanes, free, queue = blocked
         free = self._leading_on(free, lanes)
