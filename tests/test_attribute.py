@@ -13,6 +13,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from drivefuzz.oracle import Misbehavior
@@ -251,6 +252,12 @@ def test_counterfactual_other_failure_keeps_the_verdict():
     assert calls == ["careful"] and v.fault is Fault.EGO and "avoided" in v.reason
     assert counterfactual(sc, m, fake(0.1), Attribution(Fault.EGO, "x")).fault is Fault.UNCLEAR
     assert counterfactual(sc, m, fake(0.5, None), Attribution(Fault.EGO, "x")).fault is Fault.UNCLEAR
+
+    class Far:  # a replay whose ego stood still 85 m short of the place of the event, then timed out
+        ego = {"x": np.full(10, 85.0), "y": np.zeros(10)}
+
+    v = counterfactual(sc, m, fake(0.5, Far()), Attribution(Fault.EGO, "x"))
+    assert v.fault is Fault.UNCLEAR and "never came near" in v.reason
 
 
 # ------------------------------------------------------------------ pieces

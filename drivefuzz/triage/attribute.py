@@ -80,6 +80,8 @@ from drivefuzz.triage.evidence import (
 NO_COUNTERFACTUAL = frozenset({"lane_invasion", "immobility", "mission"})
 #: [m] room a driver needs past a stationary body to merge back into a lane that leads on along the route.
 MERGE_ROOM = 20.0
+#: [m] how close the careful driver's replay must come to the event's place to say anything about it.
+REACHED_M = 10.0
 #: The ADS the counterfactual replay uses.
 CAREFUL_ADS = "careful"
 
@@ -157,6 +159,16 @@ def _slippery_or_windy(scenario, trace, f: int, window_s: float = 6.0) -> bool:
     return bool(len(mu)) and float(mu.min()) < 0.5
 
 
+def _reached(trace, position, radius: float = REACHED_M) -> bool:
+    """Whether the replay's ego came within ``radius`` [m] of the event's ``position`` (True when the trace
+    does not say: a stand-in without the ego's channels)."""
+    ego = getattr(trace, "ego", None)
+    if ego is None or "x" not in ego or len(ego["x"]) == 0:
+        return True
+    d2 = (np.asarray(ego["x"]) - position[0]) ** 2 + (np.asarray(ego["y"]) - position[1]) ** 2
+    return bool(np.nanmin(d2) <= radius * radius)
+
+
 def counterfactual(scenario, misbehavior, replay: Replay, verdict: Attribution) -> Attribution:
     """Drive ``scenario`` with the careful driver; the same failure makes the verdict ``other``."""
     careful = scenario.model_copy(update={"ads": AdsSpec(name=CAREFUL_ADS)})
@@ -170,8 +182,10 @@ def counterfactual(scenario, misbehavior, replay: Replay, verdict: Attribution) 
         return Attribution(Fault.OTHER, f"a careful driver could not avoid it either ({m.oracle}/{m.kind} "
                                         f"at {m.time:.1f} s)", evidence)
     earlier = [m for m in others if m.time <= misbehavior.time]
-    if _trace is None or earlier:  # it never got there: the replay says nothing about this event
-        what = f"{earlier[0].oracle}/{earlier[0].kind} at {earlier[0].time:.1f} s" if earlier else "did not run"
+    if _trace is None or earlier or not _reached(_trace, misbehavior.position):
+        # it never got there: the replay says nothing about this event
+        what = (f"{earlier[0].oracle}/{earlier[0].kind} at {earlier[0].time:.1f} s" if earlier else
+                "did not run" if _trace is None else "never came near the place")
         return Attribution(Fault.UNCLEAR, verdict.reason + f"; the careful driver's replay failed first ({what})",
                            evidence)
     return Attribution(verdict.fault, verdict.reason + "; a careful driver avoided it", evidence)
