@@ -5,8 +5,8 @@ A seed job hands every execution whose oracles fired to :meth:`FindingStore.tria
 1. **Attribution by the rules** on the trace (:func:`drivefuzz.triage.attribute.attribute`, no replay).
 2. **Signature** (:func:`drivefuzz.triage.signature.signature`): if a folder for it exists already, the
    execution is one more hit of that finding (or incident), and nothing else runs.
-3. For a **new** signature: the counterfactual replay by the careful driver when the rules blamed the ego
-   (the verdict, and so the signature, may change to ``other``), then the **reproduction rate** under small
+3. For a **new** signature: the counterfactual replay by the careful driver when the rules did not excuse
+   the ego (the verdict, and so the signature, may change to ``other`` or ``unclear``), then the **reproduction rate** under small
    perturbations (:mod:`drivefuzz.triage.reproduce`), then the folder is written.
 
 Folders: ``findings/<signature>-<oracle>/`` when the ego is at fault (or it is unclear), ``incidents/...``
@@ -107,7 +107,7 @@ class FindingStore:
             return Triaged(seen, _key_of(seen), self._fault_of(seen, fault), False, 0)
         rules_key = sig_key
         spent = 0
-        if trace is not None and att.fault is Fault.EGO and self.cfg.counterfactual:
+        if trace is not None and att.fault is not Fault.OTHER and self.cfg.counterfactual:
             def replay(sc):
                 nonlocal spent
                 spent += 1
