@@ -101,3 +101,16 @@ def test_an_obstacle_leaves_a_way_on_along_the_route(town, mut):
     assert unfair(mut, sc, parked("D0D1_2", 45.0)) is None
     assert unfair(mut, sc, parked("D0D1_1", 97.0)) is None  # not on the way the ego needs
     assert "exit of the junction" in unfair(mut, sc, parked("D1C1_2", 6.0))
+
+
+def test_an_obstacle_does_not_close_a_one_lane_road_of_the_route():
+    from drivefuzz.scenario.roadmap import load_roadmap
+    from drivefuzz.scenario.sumofiles import read_scenario
+
+    from conftest import ROOT
+
+    sc = read_scenario(ROOT / "seeds" / "interchange" / "004")  # its route runs along WBexit, one lane
+    mut = Mutator(load_roadmap(sc.network_path()), MutationConfig())
+    parked = Actor(id="v9", kind=ActorKind.VEHICLE, nav=NavType.IMMOBILE, start_lane="WBexit_0", start_pos=60.0,
+                   speed=0.0)
+    assert "one lane" in unfair(mut, sc, parked)

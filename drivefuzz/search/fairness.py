@@ -118,10 +118,12 @@ def _blocks_the_route(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
     if i > 0 and actor.start_pos < JUNCTION_EXIT:
         return f"stands {actor.start_pos:.1f} m into {edge}, in the exit of the junction the ego comes through"
     if i + 1 >= len(route):
-        return None
+        return None  # the goal edge: the goal may lie before it
     leads = {fl for fl, _tl, _via in rmap.connections(edge, route[i + 1])}
     if leads - {actor.start_lane}:
         return None  # another lane leads on
+    if not [l for l in rmap.edge(edge).getLanes() if l.allows(PASSENGER) and l.getID() != actor.start_lane]:
+        return f"blocks {edge}, a road of one lane on the ego's route"
     room = rmap.lane(actor.start_lane).getLength() - actor.start_pos
     if room < MERGE_ROOM:
         return f"blocks {actor.start_lane}, the only lane on to {route[i + 1]}, {room:.1f} m before its end"
