@@ -41,7 +41,7 @@ from drivefuzz.campaign.job import STOP_FILE, SeedJob, job_dir, run_seed_job
 from drivefuzz.oracle import Misbehavior, OracleSettings
 from drivefuzz.scenario import AdsSpec, Scenario
 from drivefuzz.storage import atomic_write_json
-from drivefuzz.triage.store import write_hits
+from drivefuzz.triage.store import ads_flag, write_hits
 from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
 
 SCHEMA = """
@@ -119,10 +119,7 @@ def parse_duration(text: str | None, source: str = "--budget") -> float | None:
 
 def replay_command(finding_dir: Path, ads_name: str | None = None) -> str:
     """The command that replays a finding (naming its ADS when that is not an installed plugin)."""
-    from drivefuzz.ads import available_ads
-
-    trust = "" if ads_name is None or ads_name in available_ads() else f" --ads {shlex.quote(ads_name)}"
-    return f"drivefuzz replay {shlex.quote(str(finding_dir))}{trust}"
+    return f"drivefuzz replay {shlex.quote(str(finding_dir))}{ads_flag(ads_name)}"
 
 
 def load_finding(path: Path) -> Finding:

@@ -205,9 +205,10 @@ class SeedJob:
                 return "superseded"
             if should_stop() or not self._claim_ticket():
                 return "stopped"
-            _append(self.journal, {"event": "start", "key": key, "hash": scenario.content_hash(), "pid": os.getpid()})
+            h = scenario.content_hash()
+            _append(self.journal, {"event": "start", "key": key, "hash": h, "pid": os.getpid()})
             rec = {"event": "end", "key": key, "seed_index": self.si, "lineage": lineage, "cycle": cycle,
-                   "member": member, "hash": scenario.content_hash(), "parent": parent, "mutation": description,
+                   "member": member, "hash": h, "parent": parent, "mutation": description,
                    "retries": retries, "finding": None, "score": None, "risk": None, "hint": None,
                    "components": {}, "verdict": "pass", "pid": os.getpid()}
             self._execute_into(rec, runner, store, scenario, key, t_mutate, baseline)
@@ -243,9 +244,9 @@ class SeedJob:
                     rng = random.Random(f"{cfg.seed}/{self.si}/{lin.number}/{lin.cycle}/{parent_hash}/{member}"
                                         + (f"/{redraw}" if redraw else ""))
                     mut = mutator.successor(parent, cfg.strategy, rng, hint=lin.hint)
-                    if mut.scenario.content_hash() not in seen:
+                    if (h := mut.scenario.content_hash()) not in seen:
                         break
-                seen.add(mut.scenario.content_hash())
+                seen.add(h)
                 rec = execute(f"{self.si}/{lin.number}/{lin.cycle}/{member}", mut.scenario, parent_hash,
                               mut.description, mut.retries, time.perf_counter() - t0, lin.number, lin.cycle, member,
                               baseline)

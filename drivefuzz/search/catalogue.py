@@ -70,14 +70,6 @@ def _route_spot(mut: Mutator, sc: Scenario, dist: float) -> tuple[int, str, floa
     return None
 
 
-def _new_id(sc: Scenario, prefix: str, taken: list[Actor]) -> str:
-    used = {a.id for a in sc.actors} | {a.id for a in taken}
-    k = len(sc.actors) + len(taken)
-    while f"{prefix}{k}" in used:
-        k += 1
-    return f"{prefix}{k}"
-
-
 def _dest(mut: Mutator, sc: Scenario) -> str:
     return mut._route(sc)[-1]
 
@@ -93,7 +85,7 @@ def lead_stopped(mut, sc, rng):
     if spot is None:
         return None
     _, lane, pos = spot
-    a = Actor(id=_new_id(sc, "v", []), kind=ActorKind.VEHICLE, nav=NavType.IMMOBILE, start_lane=lane, start_pos=pos,
+    a = Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.IMMOBILE, start_lane=lane, start_pos=pos,
               speed=0.0)
     return [a], [], {}, f"stopped vehicle {a.id} on the ego's lane {lane} @ {pos:.1f} m"
 
@@ -112,7 +104,7 @@ def lead_slower(mut, sc, rng):
         return None
     _, lane, pos = spot
     speed = round(lane_limit(mut, lane) * rng.uniform(0.15, 0.5), 2)
-    a = Actor(id=_new_id(sc, "v", []), kind=ActorKind.VEHICLE, nav=NavType.AUTOPILOT, start_lane=lane,
+    a = Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.AUTOPILOT, start_lane=lane,
               start_pos=pos, speed=speed, dest_edge=_dest(mut, sc))
     return [a], [], {}, f"slow vehicle {a.id} at {speed:.1f} m/s on {lane} @ {pos:.1f} m"
 
@@ -125,7 +117,7 @@ def lead_brakes(mut, sc, rng):
     speed = round(lane_limit(mut, lane) * rng.uniform(0.6, 1.0), 2)
     t_brake = round(rng.uniform(2.0, 12.0), 2)
     t_go = round(t_brake + rng.uniform(2.0, 6.0), 2)
-    a = Actor(id=_new_id(sc, "v", []), kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=lane, start_pos=pos,
+    a = Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=lane, start_pos=pos,
               speed=speed, dest_edge=_dest(mut, sc),
               maneuvers=(Maneuver(time=t_brake, action=ManeuverAction.SPEED, value=0.0),
                          Maneuver(time=t_go, action=ManeuverAction.SPEED, value=speed)))
@@ -147,7 +139,7 @@ def cut_in(mut, sc, rng):
     toward = ManeuverAction.LANE_RIGHT if other.getIndex() > idx else ManeuverAction.LANE_LEFT
     speed = round(lane_limit(mut, lane) * rng.uniform(0.8, 1.2), 2)
     t_change = round(rng.uniform(1.0, 8.0), 2)
-    a = Actor(id=_new_id(sc, "v", []), kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=other.getID(),
+    a = Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=other.getID(),
               start_pos=round(min(pos, other.getLength() - 0.5), 2), speed=speed, dest_edge=_dest(mut, sc),
               maneuvers=(Maneuver(time=t_change, action=toward, value=round(rng.uniform(1.5, 3.5), 2)),))
     return [a], [], {}, f"{a.id} on {other.getID()} at {speed:.1f} m/s cuts into the ego's lane at {t_change} s"
@@ -167,10 +159,10 @@ def hidden_stopped(mut, sc, rng):
         return None
     toward = ManeuverAction.LANE_RIGHT if beside[0].getIndex() > idx else ManeuverAction.LANE_LEFT
     speed = round(lane_limit(mut, lane) * rng.uniform(0.5, 0.8), 2)
-    lead = Actor(id=_new_id(sc, "v", []), kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=lane,
+    lead = Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=lane,
                  start_pos=pos, speed=speed, dest_edge=_dest(mut, sc),
                  maneuvers=(Maneuver(time=round(rng.uniform(2.0, 6.0), 2), action=toward, value=2.0),))
-    stopped = Actor(id=_new_id(sc, "v", [lead]), kind=ActorKind.VEHICLE, nav=NavType.IMMOBILE, start_lane=lane,
+    stopped = Actor(id=mut._new_id(sc, "v", [lead]), kind=ActorKind.VEHICLE, nav=NavType.IMMOBILE, start_lane=lane,
                     start_pos=far[2], speed=0.0)
     return [lead, stopped], [], {}, f"{lead.id} swerves away from stopped {stopped.id} @ {far[2]:.1f} m on {lane}"
 
@@ -185,7 +177,7 @@ def pulls_out(mut, sc, rng):
                                                                                sc.mission.start_pos, pos)
     t_there = mut._ego_eta(sc, d)
     depart = round(max(t_there - rng.uniform(1.5, 5.0), 0.5), 1)
-    a = Actor(id=_new_id(sc, "v", []), kind=ActorKind.VEHICLE, nav=NavType.AUTOPILOT, start_lane=lane, start_pos=pos,
+    a = Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.AUTOPILOT, start_lane=lane, start_pos=pos,
               speed=round(lane_limit(mut, lane) * rng.uniform(0.3, 0.7), 2), depart=depart, dest_edge=_dest(mut, sc))
     return [a], [], {}, f"{a.id} pulls out on {lane} @ {pos:.1f} m at {depart} s"
 
@@ -204,7 +196,7 @@ def walker_crosses(mut, sc, rng):
     to_road = mut.rmap.lane(spot.lane).getWidth() / 2 + 0.5
     t_meet = mut._ego_eta(sc, d)
     depart = round(max(t_meet - to_road / speed - rng.uniform(0.0, 4.0), 0.0), 1)
-    a = Actor(id=_new_id(sc, "p", []), kind=ActorKind.PEDESTRIAN, nav=NavType.LINEAR, start_lane=spot.lane,
+    a = Actor(id=mut._new_id(sc, "p"), kind=ActorKind.PEDESTRIAN, nav=NavType.LINEAR, start_lane=spot.lane,
               start_pos=spot.pos, speed=speed, depart=depart,
               dest_xy=(round(spot.x - side * math.sin(spot.heading) * across, 2),
                        round(spot.y + side * math.cos(spot.heading) * across, 2)))
@@ -229,7 +221,7 @@ def crossing_traffic(mut, sc, rng):
     route = mut.rmap.route(mut.rmap.lane(lane).getEdge().getID(), dest)
     if not route:
         return None
-    a = Actor(id=_new_id(sc, "v", []), kind=ActorKind.VEHICLE, nav=NavType.AUTOPILOT, start_lane=lane, start_pos=pos,
+    a = Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.AUTOPILOT, start_lane=lane, start_pos=pos,
               speed=speed, dest_edge=dest)
     return [a], [], {}, f"{a.id} meets the ego at junction {node} at ~{t_meet:.1f} s ({speed:.1f} m/s)"
 

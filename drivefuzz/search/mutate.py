@@ -187,9 +187,10 @@ class Mutator(RoutePlacement):
         sep = self.cfg.min_separation
         return all(math.hypot(x - px, y - py) >= sep for px, py in self._bodies(sc, skip))
 
-    def _new_id(self, sc: Scenario, prefix: str) -> str:
-        used = {a.id for a in sc.actors}
-        k = len(sc.actors)
+    def _new_id(self, sc: Scenario, prefix: str, taken: tuple[Actor, ...] | list[Actor] = ()) -> str:
+        """An unused actor id: ``prefix`` and a number, not used by ``sc`` nor by the actors ``taken`` for it."""
+        used = {a.id for a in sc.actors} | {a.id for a in taken}
+        k = len(sc.actors) + len(taken)
         while f"{prefix}{k}" in used:
             k += 1
         return f"{prefix}{k}"

@@ -38,13 +38,17 @@ INCIDENTS = "incidents"
 ALIASES = "triage-aliases"  # rules-only signature -> the folder its counterfactual filed it in
 
 
-def replay_script(ads_name: str = "ego") -> str:
-    """``replay.sh``; an ADS that is not an installed plugin must be named on the command line to be trusted."""
+def ads_flag(ads_name: str | None) -> str:
+    """`` --ads NAME`` for an ADS that is not an installed plugin (replay must name it to trust it), else ''."""
     from drivefuzz.ads import available_ads
 
-    trust = "" if ads_name in available_ads() else f" --ads {shlex.quote(ads_name)}"
+    return "" if ads_name is None or ads_name in available_ads() else f" --ads {shlex.quote(ads_name)}"
+
+
+def replay_script(ads_name: str = "ego") -> str:
+    """``replay.sh``, naming the ADS when it is not an installed plugin."""
     return ("#!/bin/sh\n# Runs this finding again and checks it reproduces.\n"
-            f'cd "$(dirname "$0")" && exec drivefuzz replay .{trust}\n')
+            f'cd "$(dirname "$0")" && exec drivefuzz replay .{ads_flag(ads_name)}\n')
 
 
 @dataclass(frozen=True)
