@@ -169,6 +169,22 @@ def test_waiting_behind_one_parked_car_with_a_free_lane_is_ego():
     assert "counterfactual" not in v.evidence  # the careful driver does not overtake either
 
 
+@pytest.mark.parametrize("far_pos, fault", [(96.0, Fault.EGO), (62.0, Fault.OTHER)])
+def test_a_car_far_beyond_the_blocker_on_the_next_lane_leaves_room_to_pass(far_pos, fault):
+    """Parked cars on both lanes of B1B0, staggered: with the second 44 m beyond the first, the ego can pass
+    the first on the other lane and merge back in front of it (a campaign's 'incident' that was the ego's
+    bug); 10 m beyond, there is no room and the road is blocked."""
+    parked = [Actor(id="v3", kind="vehicle", nav="immobile", start_lane="B1B0_2", start_pos=52.0, speed=0.0),
+              Actor(id="v0", kind="vehicle", nav="immobile", start_lane="B1B0_1", start_pos=far_pos, speed=0.0)]
+    m, v = judge(scenario("B1B0_2", 10.0, "B0C0", 30.0, *parked))
+    assert m.oracle == "immobility"
+    assert v.fault is fault, v.reason
+    if fault is Fault.EGO:
+        assert "B1B0_1 was free" in v.reason and v.evidence["lanes"] == {"B1B0_2": "v3"}
+    else:
+        assert "every lawful way forward is blocked" in v.reason
+
+
 def test_queue_behind_a_blocked_queue_is_other():
     # a car stopped behind a broken-down car: the ego waits behind a queue that cannot move
     actors = [Actor(id="wreck", kind="vehicle", nav="immobile", start_lane="A0B0_1", start_pos=80.0, speed=0.0),

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 import drivefuzz
 from drivefuzz.errors import InvalidScenario
 from drivefuzz.scenario import (Actor, ActorKind, Maneuver, ManeuverAction, Mission, NavType, Puddle, Scenario,
-                                SimOptions, Weather)
+                                SignalShift, SimOptions, Weather)
 from drivefuzz.scenario.sumofiles import read_scenario, write_scenario
 
 from conftest import TOWN
@@ -51,7 +51,10 @@ def scenarios(draw):
                     for _ in range(draw(st.integers(0, 2))))
     weather = Weather(**{k: draw(st.floats(0, 100, **finite)) for k in ("cloud", "rain", "wind", "fog", "wetness", "puddle_density")},
                       sun_azimuth_deg=draw(st.floats(0, 360, **finite)), sun_altitude_deg=draw(st.floats(-90, 90, **finite)))
-    return Scenario(network=str(TOWN), mission=Mission(start_lane="A0B0_1", start_pos=draw(st.floats(0, 50, **finite)),
+    lights = draw(st.lists(st.sampled_from(["B1", "B2", "C1", "C2"]), unique=True, max_size=2))
+    signals = tuple(SignalShift(tls=t, shift=draw(st.floats(0, 90, **finite))) for t in lights)
+    return Scenario(network=str(TOWN), signals=signals,
+                    mission=Mission(start_lane="A0B0_1", start_pos=draw(st.floats(0, 50, **finite)),
                                                        goal_edge="B1C1", goal_pos=draw(st.floats(0, 100, **finite)),
                                                        start_speed=draw(st.floats(0, 10, **finite))),
                     actors=acts, puddles=puddles, weather=weather, seed=draw(st.integers(0, 2**31)),
@@ -74,7 +77,8 @@ def test_sumo_loads_the_files_without_warnings(tmp_path):
                           Actor(id="i", kind="vehicle", nav="immobile", start_lane="B0B1_1", start_pos=30, speed=0),
                           Actor(id="p", kind="pedestrian", nav="autopilot", start_lane="A0B0_0", start_pos=20, speed=1, dest_edge="B0B1"),
                           Actor(id="j", kind="pedestrian", nav="linear", start_lane="B0B1_0", start_pos=20, speed=1, dest_xy=(10, 10))),
-                  puddles=(Puddle(x=60, y=0, length=10, width=8, friction=0.3),))
+                  puddles=(Puddle(x=60, y=0, length=10, width=8, friction=0.3),),
+                  signals=(SignalShift(tls="B1", shift=12.5),))
     write_scenario(sc, tmp_path)
     proc = subprocess.run([drivefuzz.sumo_binary("sumo"), "-X", "never", "-c", str(tmp_path / "scenario.sumocfg"),
                            "--end", "5", "--no-step-log"], capture_output=True, text=True, timeout=60)
@@ -94,6 +98,7 @@ def test_sumo_loads_the_files_without_warnings(tmp_path):
     (dict(mission=Mission(start_lane="A0B0_0", start_pos=1, goal_edge="B1C1", goal_pos=1)), "mission.start_lane"),
     (dict(actors=(Actor(id="v", kind="vehicle", nav="immobile", start_lane="A0B0_0", start_pos=5, speed=0),)), "actors[0](v).start_lane"),
     (dict(actors=(Actor(id="p", kind="pedestrian", nav="immobile", start_lane="A0B0_1", start_pos=5, speed=0),)), "actors[0](p).start_lane"),
+    (dict(signals=(SignalShift(tls="NOPE", shift=3.0),)), "signals[0].tls"),
 ])
 def test_invalid_scenarios_name_file_and_field(tmp_path, town_scenario, change, field):
     sc = town_scenario.model_copy(update=change)

@@ -20,6 +20,7 @@ from drivefuzz.scenario.model import (  # noqa: F401  (re-exported)
     NavType,
     Puddle,
     Scenario,
+    SignalShift,
     SimOptions,
     Weather,
     lane_edge,

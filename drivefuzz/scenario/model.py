@@ -147,6 +147,14 @@ class Weather(_Model):
     sun_altitude_deg: float = Field(default=90.0, ge=-90.0, le=90.0)
 
 
+class SignalShift(_Model):
+    """A traffic light's fixed-time program moved later in time by ``shift`` seconds (mutation of signal
+    timing; :mod:`drivefuzz.scenario.signals`)."""
+
+    tls: str = Field(min_length=1, description="id of a <tlLogic> of the network with a static program")
+    shift: float = Field(ge=0.0, le=MAX_TIME, description="[s] added to the program's offset")
+
+
 class AdsSpec(_Model):
     name: str = "ego"
     options: dict[str, OptionValue] = Field(default_factory=dict)
@@ -165,6 +173,7 @@ class Scenario(_Model):
     actors: tuple[Actor, ...] = ()
     puddles: tuple[Puddle, ...] = ()
     weather: Weather = Weather()
+    signals: tuple[SignalShift, ...] = ()
     ads: AdsSpec = AdsSpec()
     seed: int = Field(default=0, ge=0)
     sim: SimOptions = SimOptions()
@@ -181,6 +190,15 @@ class Scenario(_Model):
             raise ValueError("actor id 'ego' is reserved for the ego vehicle")
         return actors
 
+    @field_validator("signals")
+    @classmethod
+    def _one_shift_per_light(cls, signals: tuple[SignalShift, ...]) -> tuple[SignalShift, ...]:
+        ids = [s.tls for s in signals]
+        dup = {i for i in ids if ids.count(i) > 1}
+        if dup:
+            raise ValueError(f"more than one shift of traffic light(s) {sorted(dup)}")
+        return signals
+
     def network_path(self, base: str | Path | None = None) -> Path:
         p = Path(self.network)
         if not p.is_absolute() and base is not None:
@@ -192,6 +210,8 @@ class Scenario(_Model):
         data = self.model_dump(mode="json")
         data["network"] = Path(self.network).name
         data.pop("name", None)
+        if not data["signals"]:  # scenarios without shifted lights keep the hashes they had before shifts existed
+            del data["signals"]
         blob = json.dumps(data, sort_keys=True, separators=(",", ":")).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
 

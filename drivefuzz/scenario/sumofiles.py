@@ -4,7 +4,8 @@ A scenario folder holds what ``sumo``/``sumo-gui`` load as they are::
 
     scenario.json     manifest: network, ADS, seed, simulation options (what SUMO has no element for)
     routes.rou.xml    the ego (id "ego") and every actor, sorted by depart time
-    fuzz.add.xml      puddles as polygons (+ friction steps on the lanes under them), weather as a POI
+    fuzz.add.xml      puddles as polygons (+ friction steps on the lanes under them), weather as a POI,
+                      shifted traffic-light programs as ``<tlLogic programID="drivefuzz-shift">``
     scenario.sumocfg  ties them together: ``sumo-gui -c scenario.sumocfg``
 
 Behaviour SUMO's XML cannot express (navigation type, maneuver schedule,
@@ -26,6 +27,7 @@ from typing import Any
 from pydantic import ValidationError
 
 from drivefuzz.errors import InvalidScenario
+from drivefuzz.scenario.signals import PROGRAM_ID, shiftable, tl_logic_element
 from drivefuzz.scenario.model import (
     EGO_LENGTH,
     EGO_WIDTH,
@@ -38,6 +40,7 @@ from drivefuzz.scenario.model import (
     NavType,
     Puddle,
     Scenario,
+    SignalShift,
     SimOptions,
     Weather,
     lane_index,
@@ -156,8 +159,13 @@ def _actor_element(a: Actor) -> ET.Element:
     return el
 
 
-def additional_xml(scenario: Scenario, puddle_lanes: list[list[str]], weather_xy: tuple[float, float]) -> str:
+def additional_xml(scenario: Scenario, puddle_lanes: list[list[str]], weather_xy: tuple[float, float],
+                   net_path: str) -> str:
     root = ET.Element("additional")
+    for sig in scenario.signals:  # validate() checked that each program can be shifted
+        tl = tl_logic_element(sig.tls, shiftable(net_path, sig.tls), sig.shift)
+        _param(tl, "drivefuzz.shift", _f(sig.shift))
+        root.append(tl)
     for i, p in enumerate(scenario.puddles):
         shape = " ".join(f"{x:.3f},{y:.3f}" for x, y in p.corners())
         poly = ET.SubElement(root, "poly", id=f"puddle_{i}", type="drivefuzz.puddle", color="0,90,200",
@@ -215,7 +223,8 @@ def write_scenario(scenario: Scenario, folder: str | os.PathLike, *, base: str |
     write = atomic_write_text if durable else _plain_write
     write(folder / ROUTES, routes_xml(scenario, route))
     write(folder / ADDITIONAL,
-                      additional_xml(scenario, [puddle_lanes(p, rmap) for p in scenario.puddles], start[:2]))
+                      additional_xml(scenario, [puddle_lanes(p, rmap) for p in scenario.puddles], start[:2],
+                         str(net_path)))
     write(folder / SUMOCFG, sumocfg_xml(net_ref, scenario.sim.step_length, scenario.sim.time_limit))
     manifest = {
         "drivefuzz_scenario": SCHEMA_VERSION,
@@ -275,12 +284,13 @@ def read_scenario(path: str | os.PathLike, *, validate_network: bool = True) -> 
     routes_path = folder / manifest["routes"]
     add_path = folder / manifest["additional"]
     mission, actors = _read_routes(routes_path)
-    puddles, weather = _read_additional(add_path)
+    puddles, weather, signals = _read_additional(add_path)
     net = Path(manifest["network"])
     net = net if net.is_absolute() else (folder / net).resolve()
     try:
         scenario = Scenario(
             network=str(net), mission=mission, actors=tuple(actors), puddles=tuple(puddles), weather=weather,
+            signals=tuple(signals),
             ads=AdsSpec.model_validate(manifest.get("ads", {})), seed=manifest.get("seed", 0),
             sim=SimOptions.model_validate(manifest.get("sim", {})), name=manifest.get("name", folder.name),
         )
@@ -345,11 +355,12 @@ def _read_routes(path: Path) -> tuple[Mission, list[Actor]]:
     return mission, [a for _, a in sorted(actors, key=lambda p: p[0])]
 
 
-def _read_additional(path: Path) -> tuple[list[Puddle], Weather]:
+def _read_additional(path: Path) -> tuple[list[Puddle], Weather, list[SignalShift]]:
     root = _parse_xml(path)
     src = str(path)
     puddles = []
     weather = Weather()
+    signals = []
     for el in root:
         params = {k.removeprefix("drivefuzz."): v for k, v in _params(el).items()}
         try:
@@ -357,11 +368,13 @@ def _read_additional(path: Path) -> tuple[list[Puddle], Weather]:
                 puddles.append(Puddle(**{k: float(v) for k, v in params.items()}))
             elif el.tag == "poi" and el.get("type") == "drivefuzz.weather":
                 weather = Weather(**{k: float(v) for k, v in params.items()})
+            elif el.tag == "tlLogic" and el.get("programID") == PROGRAM_ID:
+                signals.append(SignalShift(tls=el.get("id", ""), shift=float(params.get("shift", "nan"))))
         except ValidationError as exc:
             raise _pydantic_error(src, exc, prefix=f"{el.tag}[{el.get('id')}]") from None
         except ValueError as exc:
             raise InvalidScenario(src, f"{el.tag}[{el.get('id')}]", f"malformed param ({exc})") from None
-    return puddles, weather
+    return puddles, weather, signals
 
 
 def load_scenario(path: str | os.PathLike) -> Scenario:

@@ -21,6 +21,7 @@ from shapely.geometry import LineString, Polygon
 
 from drivefuzz.errors import InvalidNetwork, InvalidScenario
 from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN, RoadMap, load_roadmap
+from drivefuzz.scenario.signals import shiftable
 from drivefuzz.scenario import ActorKind, Puddle, Scenario, lane_edge
 
 
@@ -89,6 +90,10 @@ def validate(scenario: Scenario, rmap: RoadMap, source: str) -> tuple[str, ...]:
         if a.dest_xy is not None and not (x0 <= a.dest_xy[0] <= x1 and y0 <= a.dest_xy[1] <= y1):
             raise InvalidScenario(source, f"actors[{i}]({a.id}).dest_xy", f"{a.dest_xy} is off the network",
                                   f"x in [{x0:.0f}, {x1:.0f}], y in [{y0:.0f}, {y1:.0f}] m")
+    for i, sig in enumerate(scenario.signals):
+        if shiftable(str(rmap.path), sig.tls) is None:
+            raise InvalidScenario(source, f"signals[{i}].tls", f"{sig.tls!r} is not a fixed-time traffic light of "
+                                  f"{rmap.path.name}", "the id of a <tlLogic type=\"static\"> of the network")
     for i, p in enumerate(scenario.puddles):
         for name in ("x", "y", "length", "width", "rotation", "friction"):
             if not math.isfinite(getattr(p, name)):

@@ -17,8 +17,9 @@ import random
 from dataclasses import dataclass
 from typing import Callable
 
-from drivefuzz.scenario import Actor, ActorKind, Maneuver, ManeuverAction, NavType, Puddle, Scenario
+from drivefuzz.scenario import Actor, ActorKind, Maneuver, ManeuverAction, NavType, Puddle, Scenario, SignalShift
 from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN
+from drivefuzz.scenario.signals import phase_starts, shiftable
 from drivefuzz.search.fairness import lane_limit, unfair
 from drivefuzz.search.mutate import Mutation, Mutator
 
@@ -27,7 +28,8 @@ from drivefuzz.search.mutate import Mutation, Mutator
 class Situation:
     name: str
     nhtsa: str  # the pre-crash scenario it recreates (Najm et al. 2007)
-    build: Callable[[Mutator, Scenario, random.Random], tuple[list[Actor], list[Puddle], dict, str] | None]
+    #: (actors, puddles, weather update, description[, signal shifts]), or None when not possible this time
+    build: Callable[[Mutator, Scenario, random.Random], tuple | None]
 
 
 def add_situation(mut: Mutator, sc: Scenario, situation: Situation, rng: random.Random) -> Mutation:
@@ -36,7 +38,8 @@ def add_situation(mut: Mutator, sc: Scenario, situation: Situation, rng: random.
         built = situation.build(mut, sc, rng)
         if built is None:
             continue
-        actors, puddles, weather, desc = built
+        actors, puddles, weather, desc = built[:4]
+        shifts: tuple[SignalShift, ...] = tuple(built[4]) if len(built) > 4 else ()
         new = sc
         ok = True
         for actor in actors:
@@ -53,6 +56,9 @@ def add_situation(mut: Mutator, sc: Scenario, situation: Situation, rng: random.
         update: dict = {"actors": new.actors, "puddles": sc.puddles + tuple(puddles)}
         if weather:
             update["weather"] = sc.weather.model_copy(update=weather)
+        if shifts:  # a new shift of a light replaces the one it had
+            moved = {s.tls for s in shifts}
+            update["signals"] = tuple(s for s in sc.signals if s.tls not in moved) + shifts
         return Mutation(sc.model_copy(update=update), f"situation {situation.name}: {desc}", attempt)
     return Mutation(sc, f"situation {situation.name}: not possible on this mission", mut.cfg.max_retries)
 
@@ -250,6 +256,24 @@ def slippery_braking_zone(mut, sc, rng):
     return [], [p], {}, f"puddle mu={p.friction} {where}"
 
 
+def light_changes(mut, sc, rng):
+    """A traffic light of the ego's route turns yellow when the ego is a few seconds from its stop line
+    (the dilemma zone), by shifting the light's fixed-time program: stop, or clear the junction before red."""
+    lights = mut._signals_ahead(sc)
+    if not lights:
+        return None
+    s_stop, tls, link = lights[0] if rng.random() < 0.7 else rng.choice(lights)  # the first is timed best
+    prog = shiftable(str(mut.rmap.path), tls)
+    onsets = phase_starts(prog, link, "yY")
+    if not onsets:
+        return None
+    u = rng.uniform(0.0, 4.0)  # [s] before the ego's expected arrival at the stop line
+    t_yellow = mut._ego_eta(sc, s_stop) - u
+    shift = round((t_yellow - prog.offset - rng.choice(onsets)) % prog.cycle, 2)
+    return [], [], {}, f"light {tls} turns yellow ~{u:.1f} s before the ego reaches it (shift {shift} s)", [
+        SignalShift(tls=tls, shift=shift)]
+
+
 SITUATIONS: tuple[Situation, ...] = (
     Situation("lead_stopped", "Lead vehicle stopped", lead_stopped),
     Situation("stopped_in_fog", "Lead vehicle stopped (in fog, beyond the sensors' reach)", stopped_in_fog),
@@ -261,4 +285,5 @@ SITUATIONS: tuple[Situation, ...] = (
     Situation("walker_crosses", "Pedestrian crash without prior vehicle maneuver", walker_crosses),
     Situation("crossing_traffic", "Straight crossing paths / LTAP at non-signalized junctions", crossing_traffic),
     Situation("slippery_braking_zone", "Control loss without prior vehicle action", slippery_braking_zone),
+    Situation("light_changes", "Running red light (the ego meets the yellow-to-red change at speed)", light_changes),
 )

@@ -17,6 +17,7 @@ from shapely.geometry import LineString, Point
 
 from drivefuzz.scenario import Scenario
 from drivefuzz.scenario.roadmap import PASSENGER
+from drivefuzz.scenario.signals import shiftable
 from drivefuzz.search.fairness import lane_limit
 
 
@@ -203,6 +204,26 @@ class RoutePlacement:
                         out.append((i, s + ego_line.project(pt), lane.getID(), to.getEdge().getID(), d_actor,
                                     node.getID(), ego_state, c.getState()))
         self._conflict_cache[key] = out
+        return out
+
+    def _signals_ahead(self, sc: Scenario) -> list[tuple[float, str, int]]:
+        """The fixed-time traffic lights the ego meets on its route within ``conflict_range``: (distance [m]
+        from its start to the stop line, tls id, the ego's link index), in route order."""
+        rmap, route, m = self.rmap, self._route(sc), sc.mission
+        out = []
+        s = -m.start_pos
+        for i, e in enumerate(route[:-1]):
+            s += rmap.edge(e).getLength()
+            if s > self.cfg.conflict_range:
+                break
+            fl = self.ego_lane(sc, i)
+            conn = next((c for c in rmap.lane(fl).getOutgoing() if c.getToLane().getEdge().getID() == route[i + 1]),
+                        None)
+            if conn is None:
+                continue
+            if conn.getTLSID() and shiftable(str(rmap.path), conn.getTLSID()) is not None and s > 0:
+                out.append((s, conn.getTLSID(), conn.getTLLinkIndex()))
+            s += self._via_length(fl, conn.getToLane().getID())
         return out
 
     def _cross_place(self, sc: Scenario, rng: random.Random, speed: float):

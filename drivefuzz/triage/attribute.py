@@ -335,7 +335,8 @@ class _Event:
         tls = conn.getTLSID()
         ev = {"other_from": conn.getFromLane().getID(), "other_via": conn.getViaLaneID(), "other_entered_frame": k_in}
         if tls:
-            state = signal_state(str(self.rmap.path), tls, conn.getTLLinkIndex(), t_in)
+            shift = next((s.shift for s in self.scenario.signals if s.tls == tls), 0.0)
+            state = signal_state(str(self.rmap.path), tls, conn.getTLLinkIndex(), t_in, shift)
             if state is not None and state in RED:
                 return self.other(f"the vehicle {oth.id} entered junction {conn.getJunction().getID()} on red "
                                   f"({state!r} at {t_in:.1f} s) and struck the ego's {side}",
@@ -401,12 +402,30 @@ class _Event:
         for l, body in blocked.items():  # pass on a free lane, merge back into a blocked one that leads on
             if l not in leads:
                 continue
-            tr = actor_track(self.trace, body)
             g = self.rmap.geom(l)
-            pos, _ = g.project(float(tr.x[self.f]), float(tr.y[self.f]))
+            pos, _ = g.project(*self._xy(body))
             if g.length - pos >= MERGE_ROOM:
                 return free
         return []
+
+    def _room_to_pass(self, lanes: Mapping[str, str]) -> list[str]:
+        """The neighbouring lanes whose stationary body stands so far beyond the blocker of the ego's own
+        lane that the ego could pass that blocker on them and merge back in front of it (a car length and
+        :data:`MERGE_ROOM`), with the same room left on its own lane: such a lane does not block the way."""
+        lane = str(self.trace["lane"][self.f])
+        own = lanes.get(lane)
+        if own is None:
+            return []
+        g = self.rmap.geom(lane)
+        own_pos, _ = g.project(*self._xy(own))
+        if g.length - own_pos < MERGE_ROOM:
+            return []
+        return [l for l, body in lanes.items()
+                if l != lane and self.rmap.geom(l).project(*self._xy(body))[0] - own_pos >= EGO_LENGTH + MERGE_ROOM]
+
+    def _xy(self, body: str) -> tuple[float, float]:
+        tr = actor_track(self.trace, body)
+        return float(tr.x[self.f]), float(tr.y[self.f])
 
     def standstill(self) -> Attribution:
         trace, f = self.trace, self.f
@@ -422,7 +441,9 @@ class _Event:
             self.replay_may_settle = True  # the rules may have missed a blocker (mid-turn in a junction)
             return self.ego(f"the ego stood still with nothing blocking its way ({self.mb.oracle}/{self.mb.kind})")
         lanes, free, queue = blocked
-        free = self._leading_on(free, lanes)
+        passable = self._room_to_pass(lanes)
+        lanes = {l: b for l, b in lanes.items() if l not in passable}
+        free = self._leading_on(free + passable, lanes)
         ev = {"lanes": {l: b for l, b in lanes.items()}, "free_lanes": free}
         own = lanes.get(str(trace["lane"][f]))
         if own is not None and actor_track(trace, own).kind == "pedestrian":

@@ -11,15 +11,14 @@ Units: SI; positions are body centres; headings radians ENU (as in the trace).
 
 from __future__ import annotations
 
-import functools
 import math
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 
 import numpy as np
 
 from drivefuzz.geometry import corners
 from drivefuzz.scenario.model import EGO_LENGTH, EGO_WIDTH, lane_edge
+from drivefuzz.scenario.signals import signal_state  # noqa: F401  (re-exported for the rules)
 
 #: [m/s^2] braking a following driver must expect; harder braking needs a hazard ahead.
 COMFORT_DECEL = 3.5
@@ -179,40 +178,6 @@ def stopping_distance(v: float, mu: float) -> float:
 
 
 # ---------------------------------------------------------------------- junction links
-@functools.lru_cache(maxsize=16)
-def _programs(net_path: str) -> dict[str, tuple[str, float, list[tuple[float, str]]]]:
-    """tls id -> (type, offset [s], phases (duration [s], state)) of the net file's first program."""
-    out: dict[str, tuple[str, float, list[tuple[float, str]]]] = {}
-    for _ev, el in ET.iterparse(net_path, events=("end",)):
-        if el.tag == "tlLogic":
-            tid = el.get("id", "")
-            if tid not in out:
-                phases = [(float(p.get("duration", "0")), p.get("state", "")) for p in el.findall("phase")]
-                out[tid] = (el.get("type", "static"), float(el.get("offset", "0")), phases)
-            el.clear()
-        elif el.tag in ("edge", "junction", "connection"):
-            el.clear()
-    return out
-
-
-def signal_state(net_path: str, tls: str, link: int, t: float) -> str | None:
-    """The state of link ``link`` of the fixed-time program ``tls`` at simulation time ``t`` [s];
-    None where the program is not fixed-time (the trace does not say what it showed)."""
-    prog = _programs(net_path).get(tls)
-    if prog is None or prog[0] != "static" or not prog[2]:
-        return None
-    _type, offset, phases = prog
-    cycle = sum(d for d, _ in phases)
-    if cycle <= 0:
-        return None
-    tc = (t - offset) % cycle
-    for dur, state in phases:
-        if tc < dur:
-            return state[link] if link < len(state) else None
-        tc -= dur
-    return None
-
-
 def _lane_of(rmap, x: float, y: float, internal: bool) -> str | None:
     best = None
     for lane, dist in rmap.net.getNeighboringLanes(x, y, 3.0, includeJunctions=True):
