@@ -93,3 +93,50 @@ def test_a_lineage_that_found_something_gives_its_energy_away():
     random_mode.start_lineage(random.Random(0))
     random_mode.cycle_done(0.9, "corpus/a", None, True, False)
     assert [e.picks for e in random_mode.corpus] == [0]  # the baseline ignores what was found
+
+
+# ------------------------------------------------------------------ behavioural coverage
+CUT_IN = "straight|edge/none|vehicle|maneuver|left"
+CROSS = "straight|junction/priority|vehicle|autopilot|right"
+
+
+def test_a_rarely_met_situation_outweighs_a_common_one_of_equal_risk():
+    s = Schedule(ScheduleConfig(), "risk")
+    s.observe([CUT_IN] * 5, [])
+    assert s.weight(CROSS) == 2.0  # never met: 1 + novelty
+    assert s.weight(CUT_IN) == 1.0 + 1.0 / 6
+    values = [0.5 * s.weight(CUT_IN), 0.5 * s.weight(CROSS)]
+    assert pick_successor(values, "risk", random.Random(0)) == 1
+
+
+def test_the_situation_of_a_finding_made_loses_weight():
+    s = Schedule(ScheduleConfig(found_weight=0.5), "risk")
+    s.observe([CUT_IN, CROSS], [CUT_IN])
+    assert s.weight(CUT_IN) == 0.5 and s.weight(CROSS) > 1.0
+    # a near miss in the found situation loses against a lesser risk in another one
+    assert pick_successor([0.8 * s.weight(CUT_IN), 0.5 * s.weight(CROSS)], "risk", random.Random(0)) == 1
+
+
+def test_new_coverage_enters_the_corpus_only_when_risky_and_new():
+    s = Schedule(ScheduleConfig(corpus_risk=0.3), "risk")
+    s.start_lineage(random.Random(0))
+    assert s.is_new(CROSS, 0.4) and not s.is_new(CROSS, 0.1) and not s.is_new(None, 0.9)
+    s.add_new("corpus/x", 0.8, "v1")
+    s.observe([CROSS], [])
+    assert not s.is_new(CROSS, 0.9)
+    assert [(e.ref, e.lineage, e.hint) for e in s.corpus] == [("corpus/x", 0, "v1")]
+
+
+def test_coverage_is_ignored_without_the_risk_feedback():
+    for mode in ("random", "paper"):
+        s = Schedule(ScheduleConfig(), mode)
+        s.observe([CUT_IN], [CUT_IN])
+        assert s.weight(CUT_IN) == 1.0 and s.weight(CROSS) == 1.0 and not s.is_new(CROSS, 1.0)
+
+
+def test_coverage_survives_the_checkpoint():
+    s = Schedule(ScheduleConfig(), "risk")
+    s.observe([CUT_IN, CUT_IN, CROSS], [CROSS])
+    back = Schedule.from_json(ScheduleConfig(), s.to_json(), "risk")
+    assert back.seen == {CUT_IN: 2, CROSS: 1} and back.found == [CROSS]
+    assert back.weight(CUT_IN) == s.weight(CUT_IN)

@@ -254,22 +254,30 @@ class SeedJob:
                     return rec
                 members.append((rec, mut.scenario))
             found = any(rec["finding"] for rec, _ in members)
-            ref, hint, value = self._select(members, random.Random(
+            ref, hint, value = self._select(members, schedule, random.Random(
                 f"{cfg.seed}/{self.si}/{lin.number}/{lin.cycle}/{parent_hash}/select"))
             schedule.cycle_done(value, ref, hint, found, cfg.continue_after_finding)
             self._checkpoint(schedule, ckpt["baseline"])
             if schedule.lineage is None:
                 return "done" if cfg.one_lineage_per_seed else "yielded"
 
-    def _select(self, members: list[tuple[dict[str, Any], Any]], rng: random.Random):
+    def _select(self, members: list[tuple[dict[str, Any], Any]], schedule, rng: random.Random):
         """(corpus folder, riskiest actor, feedback value) of the member that becomes the next scenario, or
-        Nones. Findings and incidents do not become parents: the lineage goes on from a mutant that passed."""
+        Nones. Findings and incidents do not become parents: the lineage goes on from a mutant that passed.
+        A value is the feedback times the weight of the member's situation (behavioural coverage, see
+        :mod:`drivefuzz.search.schedule`); members that met a new situation enter the corpus too."""
         from drivefuzz.search.schedule import pick_successor
 
         candidates = [(rec, sc) for rec, sc in members
                       if not rec["finding"] and not rec.get("incident") and rec["risk"] is not None]
-        values = [_feedback_value(rec, self.cfg.feedback) for rec, _ in candidates]
+        values = [_feedback_value(rec, self.cfg.feedback) * schedule.weight(rec.get("situation"))
+                  for rec, _ in candidates]
         pick = pick_successor(values, self.cfg.feedback, rng)
+        for (rec, sc), value in zip(candidates, values):
+            if schedule.is_new(rec.get("situation"), rec["risk"]):
+                schedule.add_new(self._corpus_ref(sc), value, rec.get("hint"))
+        schedule.observe([rec.get("situation") for rec, _ in members],
+                         [rec.get("situation") for rec, _ in members if rec["finding"]])
         if pick is None:
             return None, None, None
         rec, successor = candidates[pick]
@@ -281,6 +289,7 @@ class SeedJob:
         from drivefuzz.search.quality import score_trace
         from drivefuzz.search.risk import risk_score
         from drivefuzz.sim.simhost import OK
+        from drivefuzz.triage.signature import situation
 
         out = runner.execute(scenario)
         timings = {"mutation": t_mutate, "isolation": 0.0}
@@ -296,6 +305,8 @@ class SeedJob:
             timings["quality"] = time.perf_counter() - t0
             rec.update(score=q.score, components=q.as_dict(), risk=r.score, hint=r.riskiest_actor,
                        risk_detail=r.as_dict())
+            if self.cfg.feedback == "risk" and r.frame is not None and r.riskiest_actor is not None:
+                rec["situation"] = situation(scenario, ex.trace, store.rmap, r.frame, r.riskiest_actor)
             t_store = time.perf_counter()
             if ex.misbehaviors:
                 m = ex.misbehaviors[0]

@@ -13,6 +13,14 @@ decides where lineages start and when they end:
   empty; otherwise from a corpus entry drawn with weight ``(rank_weight + risk rank) / (1 + picks)``: risky
   entries are preferred, and an entry that has been tried often makes way for the others.
 
+- **Behavioural coverage** (risk feedback only): every execution's riskiest moment has a *situation*
+  (:func:`drivefuzz.triage.signature.situation`: the ego's manoeuvre and road element, the other party and
+  its approach). A member's feedback value is its risk times :meth:`Schedule.weight` of its situation:
+  ``1 + novelty / (1 + times seen)`` for a situation the seed's job has met less often, and ``found_weight``
+  for the situation of a finding already made. A member whose situation the job had never met, and whose
+  risk reaches ``corpus_risk``, enters the corpus even when it is not chosen (AFL keeps an input that
+  reaches new coverage). So energy goes to risky situations that have not yet turned into findings.
+
 With ``feedback="random"`` (the baseline) nothing here looks at the feedback: lineages run ``max_cycles``
 cycles and corpus entries are drawn uniformly, so that configurations differ only in what the feedback does.
 
@@ -39,6 +47,9 @@ class ScheduleConfig(BaseModel):
     max_corpus: int = Field(default=200, ge=1, description="corpus entries kept per seed (the riskiest)")
     found_penalty: int = Field(default=3, ge=0, description="picks added to the entries of a lineage that found "
                                "something (its energy goes to lineages that have not)")
+    novelty: float = Field(default=1.0, ge=0.0, description="extra weight of a situation never met (risk mode)")
+    found_weight: float = Field(default=0.5, ge=0.0, description="weight of the situation of a finding made")
+    corpus_risk: float = Field(default=0.3, ge=0.0, description="risk at which a new situation enters the corpus")
 
 
 @dataclass
@@ -70,11 +81,14 @@ class Schedule:
     corpus: list[Entry] = field(default_factory=list)
     lineage: Lineage | None = None
     lineages: int = 0  # lineages started so far
+    seen: dict[str, int] = field(default_factory=dict)  # situation -> executions that met it
+    found: list[str] = field(default_factory=list)  # situations of findings made
 
     # ------------------------------------------------------------ state
     def to_json(self) -> dict[str, Any]:
         return {"mode": self.mode, "corpus": [asdict(e) for e in self.corpus],
-                "lineage": None if self.lineage is None else asdict(self.lineage), "lineages": self.lineages}
+                "lineage": None if self.lineage is None else asdict(self.lineage), "lineages": self.lineages,
+                "seen": dict(self.seen), "found": list(self.found)}
 
     @classmethod
     def from_json(cls, cfg: ScheduleConfig, data: dict[str, Any] | None, mode: str) -> "Schedule":
@@ -82,7 +96,36 @@ class Schedule:
             return cls(cfg, mode)
         lin = data.get("lineage")
         return cls(cfg, mode, [Entry(**e) for e in data.get("corpus", [])],
-                   None if lin is None else Lineage(**lin), int(data.get("lineages", 0)))
+                   None if lin is None else Lineage(**lin), int(data.get("lineages", 0)),
+                   {str(k): int(v) for k, v in data.get("seen", {}).items()}, [str(x) for x in data.get("found", [])])
+
+    # ------------------------------------------------------------ behavioural coverage
+    def weight(self, situation: str | None) -> float:
+        """The factor on a member's risk for meeting ``situation`` (1 in the other modes, or without one)."""
+        if self.mode != "risk" or not situation:
+            return 1.0
+        if situation in self.found:
+            return self.cfg.found_weight
+        return 1.0 + self.cfg.novelty / (1.0 + self.seen.get(situation, 0))
+
+    def is_new(self, situation: str | None, risk: float | None) -> bool:
+        """Whether an execution with ``situation`` and ``risk`` reached new coverage (see the module docstring)."""
+        return (self.mode == "risk" and bool(situation) and situation not in self.seen
+                and risk is not None and risk >= self.cfg.corpus_risk)
+
+    def observe(self, situations: list[str | None], found: list[str | None]) -> None:
+        """Count a population's situations (after its successor is chosen) and those of its findings."""
+        for s in situations:
+            if s:
+                self.seen[s] = self.seen.get(s, 0) + 1
+        for s in found:
+            if s and s not in self.found:
+                self.found.append(s)
+
+    def add_new(self, ref: str, value: float, hint: str | None) -> None:
+        """A member that reached new coverage enters the corpus (from the current lineage)."""
+        assert self.lineage is not None, "add_new() outside a lineage"
+        self._add(Entry(ref, value, self.lineage.number, hint=hint))
 
     # ------------------------------------------------------------ lineages
     def start_lineage(self, rng: random.Random) -> Lineage:

@@ -109,6 +109,17 @@ def signature(scenario, trace, misbehavior, rmap, attribution: Attribution) -> S
     )
 
 
+def situation(scenario, trace, rmap, f: int, actor: str) -> str:
+    """The situation of a risky moment (frame ``f``, the other party ``actor``) without its outcome: the
+    fields a finding's signature would share with it (manoeuvre, element, the other's kind, navigation
+    and approach), joined by ``|``. The search counts how often it met each (its behavioural coverage)."""
+    f = min(max(int(f), 0), max(trace.n_frames - 1, 0))
+    track = actor_track(trace, actor)
+    kind, nav, appr = ("none", "none", "none") if track is None else (
+        track.kind, _nav(scenario, actor), approach(trace, f, track, APPROACH_BEFORE))
+    return "|".join((maneuver(trace, f), element(scenario, trace, rmap, f), kind, nav, appr))
+
+
 def _other_party(mb, attribution: Attribution, trace, f: int) -> str | None:
     if mb.actors:
         return mb.actors[0]
