@@ -282,3 +282,22 @@ def test_an_ads_reset_exception_becomes_a_plugin_error(town_scenario):
     with pytest.raises(PluginError, match=r"^ADS 'bad_reset' raised AttributeError at reset: nope") as err:
         execute(_short(town_scenario), ads=BadReset())
     assert isinstance(err.value.__cause__, AttributeError)
+
+
+def test_an_actor_that_cannot_enter_in_time_is_dropped_not_inserted_later(town):
+    """A linear car placed 0.7 m ahead of the ego's front could not enter at 0 s; SUMO used to insert it
+    once the ego had driven past its spot, 5 m behind the ego at 7.5 m/s: a rear-end no rule had checked
+    (a campaign's incident). Now it enters within MAX_DEPART_DELAY or never."""
+    from drivefuzz.sim.execute import MAX_DEPART_DELAY
+
+    sc = Scenario(network=str(TOWN), sim=SimOptions(time_limit=15.0),
+                  mission=Mission(start_lane="D2C2_1", start_pos=45.9, goal_edge="C3D3", goal_pos=48.6),
+                  actors=(Actor(id="v4", kind="vehicle", nav="linear", start_lane="D2C2_1", start_pos=51.6, speed=7.5,
+                                dest_edge="C2C3"),
+                          Actor(id="v5", kind="vehicle", nav="linear", start_lane="D2C2_2", start_pos=60.0, speed=7.5,
+                                dest_edge="C2C3")))
+    tr = execute(sc).trace
+    a = tr.actors
+    first_seen = {a.ids[int(j)]: float(tr["t"][k]) for k in range(tr.n_frames - 1, -1, -1) for j in a.actor[a.rows(k)]}
+    assert "v5" in first_seen  # a car with room enters as placed
+    assert first_seen.get("v4", 0.0) <= MAX_DEPART_DELAY

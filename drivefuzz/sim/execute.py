@@ -77,6 +77,8 @@ from drivefuzz.sim.world import (
 GOAL_RADIUS = 2.0
 #: Speed [m/s] below which an ego at the goal counts as stopped there.
 GOAL_STOP_SPEED = 0.5
+#: [s] an actor SUMO could not insert this long after its departure time is dropped (see ``_sumo_args``)
+MAX_DEPART_DELAY = 1.0
 
 
 @dataclass(frozen=True)
@@ -103,6 +105,9 @@ def _sumo_args(scenario: Scenario, folder: Path, net: Path, gui: bool) -> list[s
         "--step-length", repr(scenario.sim.step_length),
         "--seed", str(scenario.seed % 2**31),
         "--time-to-teleport", "-1",
+        # an actor that cannot enter where and when it was placed (the spot is taken) is dropped: entering
+        # later, wherever the spot then is free, it would be a situation no fairness rule checked
+        "--max-depart-delay", repr(MAX_DEPART_DELAY),
         "--collision.action", "warn", "--collision.check-junctions", "true", "--collision.mingap-factor", "0",
         "--pedestrian.model", "striping",
         "--pedestrian.striping.jamtime", "-1", "--pedestrian.striping.jamtime.crossing", "-1",
