@@ -185,6 +185,18 @@ def test_a_car_far_beyond_the_blocker_on_the_next_lane_leaves_room_to_pass(far_p
         assert "every lawful way forward is blocked" in v.reason
 
 
+def test_a_queue_on_a_lane_that_does_not_lead_on_does_not_excuse_a_standstill():
+    """The ego starts on B1B0_1 (straight on); its route turns left from B1B0_2, where a parked car stands
+    mid-lane. A car stops at the end of B1B0_1. The ego could pass the parked car on B1B0_1 and move over
+    in front of it; the queue on B1B0_1 is not on its way (a campaign's incident, eddea252004c)."""
+    actors = [Actor(id="v2", kind="vehicle", nav="immobile", start_lane="B1B0_2", start_pos=48.0, speed=0.0),
+              Actor(id="v0", kind="vehicle", nav="maneuver", start_lane="B1B0_1", start_pos=75.0, speed=5.0,
+                    dest_edge="B0A0", maneuvers=(Maneuver(time=2.0, action="speed", value=0.0),))]
+    m, v = judge(scenario("B1B0_1", 10.0, "B0C0", 30.0, *actors))
+    assert m.oracle == "immobility"
+    assert v.fault is Fault.EGO and "behind the stationary v2" in v.reason, v.reason
+
+
 def test_queue_behind_a_blocked_queue_is_other():
     # a car stopped behind a broken-down car: the ego waits behind a queue that cannot move
     actors = [Actor(id="wreck", kind="vehicle", nav="immobile", start_lane="A0B0_1", start_pos=80.0, speed=0.0),

@@ -382,50 +382,57 @@ class _Event:
         return None
 
     # ------------------------------------------------------------------ standstills
-    def _leading_on(self, free: list[str], blocked: Mapping[str, str]) -> list[str]:
-        """The free lanes that are a way forward along the route: a lane that connects to the route's next
-        edge, or one the ego can pass the blocker on and still merge back (:data:`MERGE_ROOM` before the
-        end of a blocked lane that connects)."""
+    def _leads(self) -> set[str] | None:
+        """The lanes of the ego's edge that connect to its route's next edge; None when any lane will do
+        (the goal edge, off the route, or in a junction)."""
         m = self.scenario.mission
         route = self.rmap.route(m.start_edge, m.goal_edge) or ()
         lane = str(self.trace["lane"][self.f])
         if not lane or lane.startswith(":") or not self.rmap.has_lane(lane):
-            return free
+            return None
         edge = self.rmap.lane(lane).getEdge().getID()
         if edge not in route or route.index(edge) + 1 >= len(route):
-            return free  # the goal edge (or off the route): any lane will do
-        nxt = route[route.index(edge) + 1]
-        leads = {fl for fl, _tl, _via in self.rmap.connections(edge, nxt)}
+            return None
+        return {fl for fl, _tl, _via in self.rmap.connections(edge, route[route.index(edge) + 1])}
+
+    def _leading_on(self, free: list[str], blocked: Mapping[str, str]) -> list[str]:
+        """The free lanes that are a way forward along the route: a lane that connects to the route's next
+        edge, or one the ego can pass the blocker on and still merge back (:data:`MERGE_ROOM` before the
+        end of a blocked lane that connects)."""
+        leads = self._leads()
+        if leads is None:
+            return free
         out = [l for l in free if l in leads]
         if out or not free:
             return out
         for l, body in blocked.items():  # pass on a free lane, merge back into a blocked one that leads on
-            if l not in leads:
-                continue
-            g = self.rmap.geom(l)
-            pos, _ = g.project(*self._xy(body))
-            if g.length - pos >= MERGE_ROOM:
+            if l in leads and self._room_after(l, body) >= MERGE_ROOM:
                 return free
         return []
 
     def _room_to_pass(self, lanes: Mapping[str, str]) -> list[str]:
-        """The neighbouring lanes whose stationary body stands so far beyond the blocker of the ego's own
-        lane that the ego could pass that blocker on them and merge back in front of it (a car length and
-        :data:`MERGE_ROOM`), with the same room left on its own lane: such a lane does not block the way."""
-        lane = str(self.trace["lane"][self.f])
-        own = lanes.get(lane)
-        if own is None:
-            return []
-        g = self.rmap.geom(lane)
-        own_pos, _ = g.project(*self._xy(own))
-        if g.length - own_pos < MERGE_ROOM:
-            return []
-        return [l for l, body in lanes.items()
-                if l != lane and self.rmap.geom(l).project(*self._xy(body))[0] - own_pos >= EGO_LENGTH + MERGE_ROOM]
+        """The blocked lanes that do not block the way: a neighbour of a lane that leads on, whose
+        stationary body stands at least :data:`MERGE_ROOM` (bumper to bumper) beyond that lane's blocker,
+        which has the same room after it. The ego can pass the blocker there and merge back in front of it."""
+        leads = self._leads()
+        out = set()
+        for l, body in lanes.items():
+            if (leads is not None and l not in leads) or self._room_after(l, body) < MERGE_ROOM:
+                continue
+            end = self._along(l, body) + actor_track(self.trace, body).length / 2
+            for n, other in lanes.items():
+                if n != l and self._along(n, other) - actor_track(self.trace, other).length / 2 - end >= MERGE_ROOM:
+                    out.add(n)
+        return sorted(out)
 
-    def _xy(self, body: str) -> tuple[float, float]:
+    def _along(self, lane: str, body: str) -> float:
+        """[m] of ``body``'s centre along ``lane`` at the event."""
         tr = actor_track(self.trace, body)
-        return float(tr.x[self.f]), float(tr.y[self.f])
+        return self.rmap.geom(lane).project(float(tr.x[self.f]), float(tr.y[self.f]))[0]
+
+    def _room_after(self, lane: str, body: str) -> float:
+        """[m] of ``lane`` left beyond ``body``'s centre."""
+        return self.rmap.geom(lane).length - self._along(lane, body)
 
     def standstill(self) -> Attribution:
         trace, f = self.trace, self.f
@@ -451,10 +458,12 @@ class _Event:
         if not free and lanes:
             what = ", ".join(f"{l} by {b}" for l, b in lanes.items())
             return self.other(f"every lawful way forward is blocked by stationary bodies: {what}", **ev)
-        if queue is not None:
+        leads = self._leads()
+        if queue is not None and (leads is None or str(trace["lane"][f]) in leads):  # a queue on the way on
             return self.other(f"the queue ahead is itself blocked: {queue}", queue=queue, **ev)
-        if own is not None:
-            return self.ego(f"the ego stayed behind the stationary {own} although {', '.join(free)} was free",
+        behind = own or next(iter(lanes.values()), None)  # mid-lane-change: the blocker of the lane it wants
+        if behind is not None:
+            return self.ego(f"the ego stayed behind the stationary {behind} although {', '.join(free)} was free",
                             decided=True, **ev)
         return self.ego(f"the ego stood still although {', '.join(free)} was free", decided=True, **ev)
 
