@@ -531,8 +531,8 @@ def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
 @handle_errors
 def campaign(campaign_file, out, resume_dir, trusted_ads):
     """Run a batch: every cell of CAMPAIGN_FILE's matrix (networks x strategies x ADS x seeds) on Dask."""
-    from drivefuzz.campaign.batch import CampaignFile, cells, load_campaign_file, results_table, write_results
-    from drivefuzz.campaign.config import FINISHED
+    from drivefuzz.campaign.batch import (NO_EXECUTIONS, CampaignFile, cell_spent, cells, load_campaign_file,
+                                          results_table, write_results)
     from drivefuzz.campaign.cluster import BATCH_SYSTEMS, dask_client
     from drivefuzz.campaign.fuzz import Campaign, FuzzConfig, load_campaign, parse_duration, run_on_dask
     from drivefuzz.oracle import OracleSettings
@@ -586,7 +586,7 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
                          oracles=OracleSettings(settings=spec.oracles), mutation=spec.mutation, quality=spec.quality,
                          time_limit=c.time_limit, exec_timeout_s=c.exec_timeout)
         camp = Campaign(cell_dir, seeds, cfg, argv, on_progress=totals)
-        spent = (cell_dir / FINISHED).exists()  # a cell that spent its budget in an earlier run is done
+        spent = cell_spent(cell_dir)  # a cell that spent its budget in an earlier run is done
         pending = camp.prepare(resume=(cell_dir / "manifest.json").exists())
         work.append((camp, [] if spent else pending))
         campaigns.append(camp)
@@ -609,6 +609,9 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
     click.echo(f"{'cell':<44} {'execs':>6} {'found':>6} {'distinct':>8}  status")
     for r in rows:
         click.echo(f"{r['cell']:<44} {r['execs']:>6} {r['findings']:>6} {r['distinct']:>8}  {r['status']}")
+    for r in rows:
+        if r["execs"] == 0:
+            click.echo(f"{r['cell']} ({r['folder']}): {NO_EXECUTIONS}", err=True)
     click.echo(f"results in {out_dir / 'results.csv'}")
     if any(r["status"] != "done" for r in rows):
         click.echo(f"continue with: drivefuzz campaign --resume {out_dir}", err=True)

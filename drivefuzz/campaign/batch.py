@@ -144,7 +144,14 @@ def load_campaign_file(path: str | Path) -> CampaignFile:
     return spec
 
 
+def cell_label(network: str, strategy: str, ads: AdsSpec, seed: int) -> str:
+    """The cell as a person reads it in the results: ``town all ego fault=no_traffic_lights seed 0``."""
+    opts = "".join(f" {k}={v}" for k, v in sorted(ads.options.items()))
+    return f"{Path(network).name.split('.')[0]} {strategy} {ads.name}{opts} seed {seed}"
+
+
 def cell_name(network: str, strategy: str, ads: AdsSpec, seed: int) -> str:
+    """The cell's folder under ``cells/``: safe on any filesystem (options become a short hash)."""
     opts = ""
     if ads.options:
         opts = "-" + hashlib.sha1(json.dumps(ads.options, sort_keys=True).encode()).hexdigest()[:6]
@@ -157,6 +164,20 @@ def cells(spec: CampaignFile) -> list[tuple[str, str, str, AdsSpec, int]]:
     return [(cell_name(n, s, a, k), n, s, a, k) for n, s, a, k in itertools.product(m.networks, m.strategies, m.ads, m.seeds)]
 
 
+#: the warning of a cell that ran nothing (its jobs never got a worker, or failed before their first execution)
+NO_EXECUTIONS = "WARNING: no executions (resume the batch to run it)"
+
+
+def cell_spent(cell_dir: Path) -> bool:
+    """Whether a cell ended its run by spending its budget. One that ran nothing did not (a starved cell of an
+    earlier version wrote finished.json with 0 executions): a resume runs it."""
+    try:
+        finished = json.loads((cell_dir / FINISHED).read_text())
+    except (OSError, ValueError, RecursionError):
+        return False
+    return isinstance(finished, dict) and finished.get("executions") != 0
+
+
 def results_table(out: Path, spec: CampaignFile) -> list[dict[str, Any]]:
     """One row per cell from the cells' own directories (so it is right after a resume too)."""
     import sqlite3
@@ -164,7 +185,8 @@ def results_table(out: Path, spec: CampaignFile) -> list[dict[str, Any]]:
     rows = []
     for name, network, strategy, ads, seed in cells(spec):
         d = out / "cells" / name
-        row: dict[str, Any] = {"cell": name, "network": Path(network).name, "strategy": strategy, "ads": ads.name,
+        row: dict[str, Any] = {"cell": cell_label(network, strategy, ads, seed), "folder": f"cells/{name}",
+                               "network": Path(network).name, "strategy": strategy, "ads": ads.name,
                                "ads_options": json.dumps(ads.options, sort_keys=True), "seed": seed,
                                "execs": 0, "findings": 0, "distinct": 0, "incidents": 0, "by_oracle": "",
                                "status": "not started"}
@@ -189,10 +211,12 @@ def results_table(out: Path, spec: CampaignFile) -> list[dict[str, Any]]:
             row["by_oracle"] = " ".join(f"{k}:{v}" for k, v in sorted(counts.items()))
             manifest = json.loads((d / "manifest.json").read_text())
             done = sum((d / "jobs" / f"{i:03d}" / "summary.json").exists() for i in range(len(manifest["seeds"])))
-            if (d / FINISHED).exists():  # the run ended by spending its budget (or its single pass)
+            if cell_spent(d):  # the run ended by spending its budget (or its single pass)
                 row["status"] = "done"
             else:
                 row["status"] = "done" if done == len(manifest["seeds"]) else f"{done}/{len(manifest['seeds'])} seeds done"
+        if row["execs"] == 0:
+            row["status"] += f"; {NO_EXECUTIONS}"
         rows.append(row)
     return rows
 
@@ -209,7 +233,7 @@ def write_results(out: Path, rows: list[dict[str, Any]]) -> None:
     w.writeheader()
     w.writerows(rows)
     atomic_write_text(out / "results.csv", buf.getvalue())
-    cols = ["cell", "execs", "findings", "distinct", "incidents", "by_oracle", "status"]
+    cols = ["cell", "folder", "execs", "findings", "distinct", "incidents", "by_oracle", "status"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(str(r[c]) for c in cols) + " |" for r in rows]
     atomic_write_text(out / "results.md", "\n".join(lines) + "\n")
