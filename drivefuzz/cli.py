@@ -280,7 +280,7 @@ def _progress_printer():
 @click.option("--budget", default=None, help="Wall-clock budget of this run, e.g. 90s, 10m, 2h.")
 @click.option("--max-execs", type=click.IntRange(min=1), default=None, help="Stop after N executions (per run: a resume runs N more).")
 @click.option("--seed", "rng_seed", type=click.IntRange(min=0), default=None, help="Campaign RNG seed [0].")
-@click.option("--seeds", "seeds_dir", type=click.Path(file_okay=False), help="Seed folder (default seeds/<network>/).")
+@click.option("--seeds", "seeds_dir", type=click.Path(file_okay=False), help="Seed folder (default: <network's folder>/../seeds/<network>/, else ./seeds/<network>/).")
 @click.option("--ads", "ads_name", default=None, help="ADS plugin under test [ego].")
 @click.option("--ads-option", multiple=True, metavar="K=V", help="ADS option, e.g. fault=speeding.")
 @click.option("--feedback", type=click.Choice(["risk", "paper", "random"]), default=None,
@@ -473,8 +473,22 @@ def _print_findings(title: str, findings) -> None:
         click.echo(f"{'':>38}{replay_command(f.path, f.ads)}")
 
 
-def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
-    """The seeds in ``seeds_dir`` (default ``seeds/<network>/``), or ``count`` new ones.
+def _seed_folder(network: Path, name: str, seeds_dir: str | None, seeds_root: Path | None) -> Path:
+    """Where a network's seeds are: ``--seeds``; else the first of ``<seeds_root>/<name>/`` (a campaign
+    file's ``seeds``), ``<network's folder>/../seeds/<name>/`` (the layout of this repository: a run from
+    any folder finds the network's own verified seeds) and ``./seeds/<name>/`` that holds seeds; else
+    ``./seeds/<name>/``, where new ones are generated."""
+    from drivefuzz.scenario.seed import list_seeds
+
+    if seeds_dir:
+        return Path(seeds_dir)
+    here = Path("seeds") / name
+    candidates = ([seeds_root / name] if seeds_root else []) + [network.resolve().parent.parent / "seeds" / name, here]
+    return next((c for c in candidates if c.is_dir() and list_seeds(c)), here)
+
+
+def _seeds_for(network: str, seeds_dir: str | None, count: int = 4, seeds_root: Path | None = None):
+    """The seeds of :func:`_seed_folder`, or ``count`` new ones.
 
     New seeds are written into that folder only when it is new or empty: a folder
     that holds something else is never written into (the campaign keeps its seeds
@@ -487,7 +501,7 @@ def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
     from drivefuzz.sim.verify import dry_run
 
     rmap = load_network(network)
-    folder = Path(seeds_dir) if seeds_dir else Path("seeds") / rmap.name
+    folder = _seed_folder(Path(network), rmap.name, seeds_dir, seeds_root)
     if folder.exists() and not folder.is_dir():
         raise InvalidConfig("--seeds", str(folder), "is a file", "a folder of seed scenarios (000/, 001/...)")
     found = list_seeds(folder) if folder.is_dir() else []
@@ -579,7 +593,7 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
         if (cell_dir / "manifest.json").exists():  # resuming: the cell's own seeds, wherever this runs from
             seeds = load_campaign(cell_dir)[0]
         else:
-            seeds = _seeds_for(network, None, count=c.seeds_per_network)[:c.seeds_per_network]
+            seeds = _seeds_for(network, None, c.seeds_per_network, spec.seeds_root)[:c.seeds_per_network]
         cfg = FuzzConfig(cycles=c.cycles, population=c.population, strategy=strategy, seed=seed, budget_s=budget_s,
                          max_execs=c.max_execs, feedback="random" if c.no_feedback else c.feedback,
                          continue_after_finding=c.continue_after_finding, ads=ads,

@@ -436,12 +436,15 @@ def test_seeds_are_not_written_into_a_foreign_default_folder(tmp_path, monkeypat
     from drivefuzz.scenario.sumofiles import load_scenario
 
     monkeypatch.chdir(tmp_path)
+    net = tmp_path / "a" / "b" / "town.net.xml"  # no seeds next to it
+    net.parent.mkdir(parents=True)
+    shutil.copy(TOWN, net)
     foreign = tmp_path / "seeds" / "town"
     foreign.mkdir(parents=True)
     (foreign / "notes.txt").write_text("mine")
     new = load_scenario(SEEDS / "000")
     monkeypatch.setattr("drivefuzz.scenario.seed.generate_seeds", lambda *a, **k: [new])  # no dry runs
-    assert cli._seeds_for(str(TOWN), None) == [new]
+    assert cli._seeds_for(str(net), None) == [new]
     assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"]
 
 

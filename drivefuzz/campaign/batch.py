@@ -9,7 +9,9 @@ per cell. ``drivefuzz campaign --resume DIR`` continues it. Example::
     budget = "10m"            # wall-clock budget of each cell (and/or max_execs)
     cycles = 10
     population = 8
-    seeds_per_network = 8     # seed missions per network (seeds/<net>/, generated when missing)
+    seeds_per_network = 8     # seed missions per network (generated when missing)
+    seeds = "../seeds"        # optional: a folder with seeds/<net>/ per network (default: next to the
+                              # network, <its folder>/../seeds/<net>/, then ./seeds/<net>/)
 
     [matrix]
     networks = ["networks/town.net.xml", "networks/highway.net.xml"]
@@ -66,6 +68,8 @@ class CampaignSection(_Strict):
     cycles: int = Field(default=10, ge=1)
     population: int = Field(default=8, ge=1)
     seeds_per_network: int = Field(default=8, ge=1)
+    seeds: str | None = Field(default=None, description="a folder of seed folders, one per network name "
+                              "(<seeds>/<net>/NNN/); default: <network's folder>/../seeds/<net>/, then ./seeds/<net>/")
     time_limit: float | None = Field(default=None, gt=0)
     continue_after_finding: bool = False
     no_feedback: bool = False
@@ -94,6 +98,10 @@ class CampaignFile(_Strict):
     oracles: dict[str, dict[str, Any]] = Field(default_factory=dict)
     mutation: MutationConfig = Field(default_factory=MutationConfig)
     quality: QualityConfig = Field(default_factory=QualityConfig)
+
+    @property
+    def seeds_root(self) -> Path | None:
+        return Path(self.campaign.seeds) if self.campaign.seeds else None
 
 
 def load_campaign_file(path: str | Path) -> CampaignFile:
@@ -127,6 +135,12 @@ def load_campaign_file(path: str | Path) -> CampaignFile:
             raise InvalidConfig(str(path), "matrix.networks", f"no such network {n!r}", "paths to .net.xml files")
         nets.append(str(p.resolve()))
     spec.matrix.networks = nets
+    if spec.campaign.seeds is not None:
+        root = Path(spec.campaign.seeds) if Path(spec.campaign.seeds).is_absolute() else base / spec.campaign.seeds
+        if not root.is_dir():
+            raise InvalidConfig(str(path), "campaign.seeds", f"no such folder {spec.campaign.seeds!r}",
+                                "a folder with one folder of seeds per network name (seeds/<net>/000/...)")
+        spec.campaign.seeds = str(root.resolve())
     from drivefuzz.ads import load_ads
     from drivefuzz.campaign.fuzz import parse_duration
 
