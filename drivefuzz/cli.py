@@ -79,6 +79,16 @@ class _Seconds(click.ParamType):
 
 
 MAX_SECONDS = 86400.0
+
+
+def _ads_from_the_command_line(_ctx, _param, value):
+    """An ADS named by ``--ads`` is the user's word: a ``mymodule:Class`` in the current folder is found
+    (the security rule of issue 15 keeps names read from data files to installed plugins)."""
+    from drivefuzz.ads import allow_current_folder
+
+    for name in (value if isinstance(value, tuple) else [value] if value else []):
+        allow_current_folder(name)
+    return value
 #: at most this many local workers per CPU: more only queue, each holding a SUMO and semaphores
 JOBS_PER_CPU = 4
 
@@ -148,7 +158,7 @@ def main() -> None:
 @main.command()
 @click.argument("scenario", type=click.Path())
 @click.option("--gui", is_flag=True, help="Show the run in sumo-gui (through traci; same code path).")
-@click.option("--ads", "ads_name", default=None, help="ADS plugin (default: the scenario's).")
+@click.option("--ads", "ads_name", default=None, callback=_ads_from_the_command_line, help="ADS plugin (default: the scenario's).")
 @click.option("--ads-option", multiple=True, metavar="K=V", help="ADS option, e.g. fault=speeding.")
 @click.option("--trace", "trace_out", type=click.Path(file_okay=False), help="Save the trace (Parquet) here.")
 @oracle_options
@@ -281,7 +291,7 @@ def _progress_printer():
 @click.option("--max-execs", type=click.IntRange(min=1), default=None, help="Stop after N executions (per run: a resume runs N more).")
 @click.option("--seed", "rng_seed", type=click.IntRange(min=0), default=None, help="Campaign RNG seed [0].")
 @click.option("--seeds", "seeds_dir", type=click.Path(file_okay=False), help="Seed folder (default: <network's folder>/../seeds/<network>/, else ./seeds/<network>/).")
-@click.option("--ads", "ads_name", default=None, help="ADS plugin under test [ego].")
+@click.option("--ads", "ads_name", default=None, callback=_ads_from_the_command_line, help="ADS plugin under test [ego].")
 @click.option("--ads-option", multiple=True, metavar="K=V", help="ADS option, e.g. fault=speeding.")
 @click.option("--feedback", type=click.Choice(["risk", "paper", "random"]), default=None,
               help="How successors are chosen: the risk score, the paper's driving-quality score, or at random [risk].")
@@ -540,7 +550,7 @@ def _seeds_for(network: str, seeds_dir: str | None, count: int = 4, seeds_root: 
 @click.argument("campaign_file", type=click.Path(), required=False)
 @click.option("-o", "out", type=click.Path(file_okay=False), help="Output directory (default: new under ./drivefuzz-out/).")
 @click.option("--resume", "resume_dir", type=click.Path(file_okay=False), help="Continue the batch in this directory.")
-@click.option("--ads", "trusted_ads", multiple=True, metavar="NAME",
+@click.option("--ads", "trusted_ads", multiple=True, callback=_ads_from_the_command_line, metavar="NAME",
               help="With --resume: an ADS of the batch's campaign.json that is not installed, to import it anyway.")
 @handle_errors
 def campaign(campaign_file, out, resume_dir, trusted_ads):
@@ -660,7 +670,7 @@ def _batch_progress(campaigns):
 @main.command()
 @click.argument("finding", type=click.Path())
 @click.option("--gui", is_flag=True, help="Show the run in sumo-gui.")
-@click.option("--ads", "ads_name", default=None, metavar="NAME",
+@click.option("--ads", "ads_name", default=None, callback=_ads_from_the_command_line, metavar="NAME",
               help="The finding's ADS when it is not an installed plugin (package.module:Class): import it anyway.")
 @handle_errors
 def replay(finding, gui, ads_name):

@@ -54,3 +54,33 @@ def test_a_campaign_file_names_its_seed_folder(tmp_path, monkeypatch):
     spec_file.write_text(f'[campaign]\nseeds = "nowhere"\n[matrix]\nnetworks = ["{TOWN}"]\n')
     with pytest.raises(InvalidConfig, match="campaign.seeds"):
         load_campaign_file(spec_file)
+
+
+def _drivefuzz(args, cwd):
+    """The installed console script, as a user runs it (its folder, not ``cwd``, is on its import path)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    exe = Path(sys.executable).with_name("drivefuzz")
+    return subprocess.run([str(exe), *map(str, args)], cwd=cwd, capture_output=True, text=True, timeout=300)
+
+
+def test_an_ads_module_in_the_current_folder(tmp_path):
+    """--ads mycar:MinimalADS with mycar.py where the user runs drivefuzz: fuzzed in the simulation host (which
+    runs with -I); a shapely.py beside it is not imported; a misspelt module is one line and exit 2."""
+    import sqlite3
+
+    shutil.copy(ROOT / "examples" / "ads-minimal" / "drivefuzz_ads_minimal.py", tmp_path / "mycar.py")
+    marker = tmp_path / "marker"
+    (tmp_path / "shapely.py").write_text(f"open({str(marker)!r}, 'w').write('ran')\n")
+    net = ROOT / "networks" / "intersection.net.xml"
+    r = _drivefuzz(["fuzz", net, "--ads", "mycar:MinimalADS", "--max-execs", "2", "-o", "out"], tmp_path)
+    assert r.returncode in (0, 1), r.stderr
+    verdicts = [v for (v,) in sqlite3.connect(tmp_path / "out" / "index.sqlite").execute("SELECT verdict FROM executions")]
+    assert len(verdicts) == 2 and not any("error" in v or "crash" in v for v in verdicts), verdicts
+    assert not marker.exists()
+    r = _drivefuzz(["fuzz", net, "--ads", "mycra:MinimalADS", "--max-execs", "1", "-o", "out2"], tmp_path)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "no module named 'mycra'" in r.stderr
+    r = _drivefuzz(["fuzz", net, "--ads", "mycar:Nope", "--max-execs", "1", "-o", "out2"], tmp_path)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "'Nope'" in r.stderr, r.stderr
