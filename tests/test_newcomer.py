@@ -84,3 +84,19 @@ def test_an_ads_module_in_the_current_folder(tmp_path):
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "no module named 'mycra'" in r.stderr
     r = _drivefuzz(["fuzz", net, "--ads", "mycar:Nope", "--max-execs", "1", "-o", "out2"], tmp_path)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "'Nope'" in r.stderr, r.stderr
+
+
+def test_the_readme_one_liner_opens_a_trace_with_the_analysis_extra(tmp_path):
+    """README: pandas.read_parquet(".../trace/ego.parquet"), pandas from the `analysis` extra (pyproject)."""
+    import re
+    import tomllib
+
+    pandas = pytest.importorskip("pandas", reason="pip install -e '.[analysis]' (the test extra has it too)")
+    extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    assert any(d.startswith("pandas") for d in extras["analysis"])
+    readme = (ROOT / "README.md").read_text()
+    assert re.search(r'pandas\.read_parquet\(.*\n.*pip install -e "\.\[analysis\]"', readme)
+    r = CliRunner().invoke(main, ["run", str(ROOT / "seeds" / "intersection" / "000"), "--trace", str(tmp_path / "t")])
+    assert r.exit_code in (0, 1), r.output
+    ego = pandas.read_parquet(tmp_path / "t" / "ego.parquet")
+    assert len(ego) > 10 and {"x", "y"} <= set(ego.columns), ego.columns
