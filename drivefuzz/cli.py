@@ -262,23 +262,6 @@ def seed(network, count, out, rng_seed, no_verify, force):
 
 
 # ---------------------------------------------------------------------------- fuzz
-def _progress_printer():
-    tty = sys.stderr.isatty()
-    last = [0.0]
-
-    def show(p):
-        now = time.monotonic()
-        if now - last[0] < (0.2 if tty else 10.0):
-            return
-        last[0] = now
-        best = "-" if p.best_risk is None else f"{p.best_risk:.2f}"
-        where = (f"seed {p.seed_index}  lineage {p.lineage}  cycle {p.cycle}" if p.jobs_running == 1
-                 else f"jobs {p.jobs_done}/{p.jobs_total} done, {p.jobs_running} running")
-        line = f"execs {p.execs}  {p.rate:.2f}/s  {where}  best risk {best}  findings {p.findings}"
-        click.echo(("\r" + line + "   ") if tty else line, err=True, nl=not tty)
-    return show
-
-
 @main.command()
 @click.argument("network", type=click.Path(), required=False)
 @click.option("-o", "out", type=click.Path(file_okay=False), help="Output directory (default: new under ./drivefuzz-out/).")
@@ -313,6 +296,7 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
     """Fuzz the ADS on NETWORK (a .net.xml). Exit 0: nothing found; 1: misbehaviour found; 2: bad input."""
     from drivefuzz.ads import check_trusted
     from drivefuzz.campaign.fuzz import Campaign, load_campaign, parse_duration
+    from drivefuzz.campaign.status import StatusPrinter
 
     argv = ["drivefuzz", *sys.argv[1:]]
     if resume_dir:
@@ -354,15 +338,19 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
     _writable_dir(out_dir, "-o")
     if not resume_dir:
         seeds = _seeds_for(network, seeds_dir)
-    campaign = Campaign(out_dir, seeds, cfg, argv, on_progress=_progress_printer())
+    campaign = Campaign(out_dir, seeds, cfg, argv)
     where = scheduler or ("local" if (jobs or 1) > 1 else None)
+    campaign.on_progress = status = StatusPrinter([campaign], None if scheduler else jobs or 1,
+                                                  f"drivefuzz fuzz -> {out_dir}")
     try:
         findings = _run_campaign(campaign, bool(resume_dir), where, jobs or 1)
     except KeyboardInterrupt:
+        status.close()
         findings = campaign.finish()
         _print_summary(campaign, findings, out_dir, report_all)
         click.echo("aborted", err=True)
         sys.exit(EXIT_ABORTED)
+    status.close()
     _print_summary(campaign, findings, out_dir, report_all)
     sys.exit(_exit_code(findings + (campaign.incidents if report_all else []), bool(campaign.failed_jobs)))
 
@@ -559,6 +547,7 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
                                           results_table, write_results)
     from drivefuzz.campaign.cluster import BATCH_SYSTEMS, dask_client
     from drivefuzz.campaign.fuzz import Campaign, FuzzConfig, load_campaign, parse_duration, run_on_dask
+    from drivefuzz.campaign.status import StatusPrinter
     from drivefuzz.oracle import OracleSettings
     from drivefuzz.storage import atomic_write_json
 
@@ -597,7 +586,8 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
     budget_s = parse_duration(c.budget)
     argv = ["drivefuzz", *sys.argv[1:]]
     work, campaigns = [], []
-    totals = _batch_progress(campaigns)
+    where = spec.run.where
+    status = StatusPrinter(campaigns, spec.run.jobs if where == "local" else None, f"drivefuzz campaign -> {out_dir}")
     for name, network, strategy, ads, seed in cells(spec):
         cell_dir = out_dir / "cells" / name
         if (cell_dir / "manifest.json").exists():  # resuming: the cell's own seeds, wherever this runs from
@@ -609,13 +599,12 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
                          continue_after_finding=c.continue_after_finding, ads=ads,
                          oracles=OracleSettings(settings=spec.oracles), mutation=spec.mutation, quality=spec.quality,
                          time_limit=c.time_limit, exec_timeout_s=c.exec_timeout)
-        camp = Campaign(cell_dir, seeds, cfg, argv, on_progress=totals)
+        camp = Campaign(cell_dir, seeds, cfg, argv, on_progress=status)
         spent = cell_spent(cell_dir)  # a cell that spent its budget in an earlier run is done
         pending = camp.prepare(resume=(cell_dir / "manifest.json").exists())
         work.append((camp, [] if spent else pending))
         campaigns.append(camp)
 
-    where = spec.run.where
     click.echo(f"{len(campaigns)} cell(s) on {where} -> {out_dir}", err=True)
     aborted = False
     try:
@@ -625,6 +614,7 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
     except KeyboardInterrupt:
         aborted = True
     finally:
+        status.close()
         for camp in campaigns:
             camp.finish()
         rows = results_table(out_dir, spec)
@@ -643,27 +633,6 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
         sys.exit(EXIT_ABORTED)
     failed = any(camp.failed_jobs for camp in campaigns)
     sys.exit(EXIT_FOUND if any(r["findings"] for r in rows) else (EXIT_INTERNAL if failed else EXIT_CLEAN))
-
-
-def _batch_progress(campaigns):
-    show = _progress_printer()
-
-    def update(_p):
-        from drivefuzz.campaign.fuzz import Progress
-
-        total = Progress(jobs_total=sum(c.progress.jobs_total for c in campaigns))
-        total.started = min((c.progress.started for c in campaigns), default=total.started)
-        for c in campaigns:
-            p = c.progress
-            total.execs += p.execs
-            total.new_execs += p.new_execs
-            total.findings += p.findings
-            total.jobs_done += p.jobs_done
-            total.jobs_running += p.jobs_running
-            if p.best_risk is not None and (total.best_risk is None or p.best_risk > total.best_risk):
-                total.best_risk = p.best_risk
-        show(total)
-    return update
 
 
 # -------------------------------------------------------------------------- replay

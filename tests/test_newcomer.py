@@ -100,3 +100,25 @@ def test_the_readme_one_liner_opens_a_trace_with_the_analysis_extra(tmp_path):
     assert r.exit_code in (0, 1), r.output
     ego = pandas.read_parquet(tmp_path / "t" / "ego.parquet")
     assert len(ego) > 10 and {"x", "y"} <= set(ego.columns), ego.columns
+
+
+def test_progress_off_a_terminal_is_plain_lines_and_the_summary_says_sim_time(tmp_path):
+    """Not a terminal (CliRunner's stderr): plain status lines with elapsed, remaining, rate, where, best risk,
+    findings, the last finding and workers busy (1 of 1 worker, never more); no terminal control codes. The
+    summary's event time is headed 'sim time'."""
+    seeds = tmp_path / "seeds"
+    shutil.copytree(ROOT / "seeds" / "town" / "005", seeds / "000")
+    manifest = seeds / "000" / "scenario.json"
+    manifest.write_text(re.sub(r'"network": "[^"]*"', f'"network": "{TOWN}"', manifest.read_text()))
+    r = CliRunner().invoke(main, ["fuzz", str(TOWN), "--seeds", str(seeds), "--ads-option", "fault=speeding",
+                                  "--max-execs", "3", "--cycles", "1", "--population", "2", "-o", str(tmp_path / "o")])
+    assert r.exit_code == 1, r.output
+    lines = [line for line in r.stderr.splitlines() if line.startswith("elapsed ")]
+    assert lines and "\x1b" not in r.stderr and "\r" not in r.stderr, r.stderr
+    last = lines[-1]
+    for part in ("remaining 0 executions", "execs 3 (", "/s)", "cycle 0", "best risk ", "findings 1 (",
+                 "last: speeding", "jobs 0/1 done"):
+        assert part in last, (part, last)
+    busy = [int(re.search(r"workers busy (\d+)/1", line).group(1)) for line in lines]
+    assert max(busy) <= 1, lines
+    assert re.search(r"#\s+hits\s+reproduced\s+sim time", r.stdout), r.stdout

@@ -100,6 +100,9 @@ class Progress:
     jobs_done: int = 0
     jobs_running: int = 0
     started: float = field(default_factory=time.monotonic)
+    last_exec_at: float = 0.0  # [s, monotonic] when the last execution was indexed (0: none yet)
+    last_finding: str | None = None  # the signature of the finding indexed last
+    last_finding_at: float = 0.0  # [s, monotonic]
 
     @property
     def rate(self) -> float:
@@ -241,6 +244,7 @@ class Campaign:
             return
         p = self.progress
         p.execs += 1
+        p.last_exec_at = time.monotonic()
         p.seed_index, p.cycle, p.lineage = rec["seed_index"], rec["cycle"], rec.get("lineage", 0)
         if rec.get("risk") is not None and (p.best_risk is None or rec["risk"] > p.best_risk):
             p.best_risk = rec["risk"]
@@ -252,6 +256,8 @@ class Campaign:
                     known.hits += 1
                 elif (path / "verdict.json").is_file():
                     kept.append(load_finding(path))
+                    if col == "finding":
+                        p.last_finding, p.last_finding_at = kept[-1].label, p.last_exec_at
         p.findings, p.incidents = len(self.findings), len(self.incidents)
 
     def _checked_finding(self, rec: dict[str, Any]) -> dict[str, Any]:
@@ -275,12 +281,22 @@ class Campaign:
             self.stop_reason = self.stop_reason or "stopped on request (Ctrl-C)"
             return True
         if self._deadline is not None and time.monotonic() >= self._deadline:
-            self.stop_reason = self.stop_reason or f"the time budget of {_duration(self.cfg.budget_s)} was spent"
+            self.stop_reason = self.stop_reason or f"the time budget of {format_duration(self.cfg.budget_s)} was spent"
             return True
         if self.cfg.max_execs is not None and self.progress.new_execs >= self.cfg.max_execs:
             self.stop_reason = self.stop_reason or f"--max-execs {self.cfg.max_execs} executions were run"
             return True
         return False
+
+    def seconds_left(self) -> float | None:
+        """[s] of the time budget left (all of it before the first job runs); None without one."""
+        if self.cfg.budget_s is None:
+            return None
+        return self.cfg.budget_s if self._deadline is None else max(0.0, self._deadline - time.monotonic())
+
+    def execs_left(self) -> int | None:
+        """Executions of --max-execs left in this run; None without it."""
+        return None if self.cfg.max_execs is None else max(0, self.cfg.max_execs - self.progress.new_execs)
 
     def request_stop(self) -> None:
         (self.out / STOP_FILE).touch()
@@ -531,7 +547,8 @@ def load_campaign(out: str | os.PathLike) -> tuple[list[Scenario], FuzzConfig, l
     return seeds, cfg, list(manifest.command)
 
 
-def _duration(seconds: float | None) -> str:
+def format_duration(seconds: float | None) -> str:
+    """``1h2m``, ``3m5s``, ``42s``: the inverse of :func:`parse_duration`."""
     if seconds is None:
         return "none"
     m, s = divmod(int(round(seconds)), 60)
