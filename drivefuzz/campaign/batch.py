@@ -50,6 +50,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from drivefuzz.campaign.cluster import BATCH_SYSTEMS, BatchSpec
 from drivefuzz.campaign.config import FINISHED
+from drivefuzz.campaign.configfile import MAX_EXEC_TIMEOUT_S
 from drivefuzz.errors import InvalidConfig
 from drivefuzz.search.mutate import MutationConfig
 from drivefuzz.search.quality import QualityConfig
@@ -59,7 +60,7 @@ STRATEGIES = ("all", "congestion", "entropy", "instability", "maneuver", "mix")
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class CampaignSection(_Strict):
@@ -70,11 +71,11 @@ class CampaignSection(_Strict):
     seeds_per_network: int = Field(default=8, ge=1)
     seeds: str | None = Field(default=None, description="a folder of seed folders, one per network name "
                               "(<seeds>/<net>/NNN/); default: <network's folder>/../seeds/<net>/, then ./seeds/<net>/")
-    time_limit: float | None = Field(default=None, gt=0)
+    time_limit: float | None = Field(default=None, gt=0, le=MAX_EXEC_TIMEOUT_S)
     continue_after_finding: bool = False
     no_feedback: bool = False
     feedback: Literal["risk", "paper", "random"] = "risk"
-    exec_timeout: float = Field(default=300.0, gt=0)
+    exec_timeout: float = Field(default=300.0, gt=0, le=MAX_EXEC_TIMEOUT_S)
 
 
 class MatrixSection(_Strict):
