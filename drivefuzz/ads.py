@@ -17,6 +17,8 @@ from __future__ import annotations
 import abc
 import importlib
 import inspect
+import os
+import sys
 from dataclasses import dataclass, field
 from importlib.metadata import entry_points
 from typing import Any, ClassVar, Mapping, NamedTuple
@@ -173,11 +175,36 @@ def check_trusted(name: str, source: str, field: str, command_line: str | None =
                         f"an installed ADS ({', '.join(sorted(eps)) or 'none'}), or --ads {name} to trust it")
 
 
+#: folders whose modules the user named with ``--ads module:Class`` on the command line (the current folder);
+#: the environment carries them to Dask workers and simulation hosts, which run with ``python -I``
+ADS_PATH_ENV = "DRIVEFUZZ_ADS_PATH"
+
+
+def allow_current_folder(name: str) -> None:
+    """``--ads mymodule:Class`` on the command line finds ``mymodule.py`` (or ``mymodule/``) in the current
+    folder: the user's own word, as for any ADS named there. Only that folder is added, and only for such a
+    module; it goes last on the import path, so a ``shapely.py`` lying beside it shadows nothing."""
+    module = name.partition(":")[0].split(".")[0]
+    if ":" not in name or name in available_ads() or not module.isidentifier():
+        return
+    cwd = os.getcwd()
+    if not (os.path.isfile(os.path.join(cwd, module + ".py")) or os.path.isdir(os.path.join(cwd, module))):
+        return
+    paths = _user_paths()
+    if cwd not in paths:
+        os.environ[ADS_PATH_ENV] = os.pathsep.join(paths + [cwd])
+
+
+def _user_paths() -> list[str]:
+    return [p for p in os.environ.get(ADS_PATH_ENV, "").split(os.pathsep) if p]
+
+
 def load_ads(name: str, options: Mapping[str, Any] | None = None, source: str = "--ads") -> ADS:
     """The ADS plugin registered as ``name``, or the class at ``name`` = ``package.module:Class``.
 
     The second form runs an ADS under development without packaging it; the module
-    must be importable (installed, or on PYTHONPATH). Callers that read ``name`` from
+    must be importable (installed, on PYTHONPATH, or in the folder :func:`allow_current_folder`
+    was given on the command line). Callers that read ``name`` from
     a file check it with :func:`check_trusted` first.
     """
     eps = available_ads()
@@ -212,9 +239,11 @@ def load_ads(name: str, options: Mapping[str, Any] | None = None, source: str = 
 def _import_class(name: str, source: str) -> Any:
     """The object at ``package.module:Class``; a module or class that is not there is the user's mistake."""
     module, _, attr = name.partition(":")
-    valid = "an installed ADS, or package.module:Class with the module importable (installed, or on PYTHONPATH)"
+    valid = ("an installed ADS, or package.module:Class with the module in the current folder, installed, "
+             "or on PYTHONPATH")
     if not module or not attr.isidentifier():
         raise InvalidConfig(source, name, "not of the form package.module:Class", valid)
+    sys.path.extend(p for p in _user_paths() if p not in sys.path)
     try:
         mod = importlib.import_module(module)
     except ModuleNotFoundError as exc:

@@ -79,6 +79,16 @@ class _Seconds(click.ParamType):
 
 
 MAX_SECONDS = 86400.0
+
+
+def _ads_from_the_command_line(_ctx, _param, value):
+    """An ADS named by ``--ads`` is the user's word: a ``mymodule:Class`` in the current folder is found
+    (the security rule of issue 15 keeps names read from data files to installed plugins)."""
+    from drivefuzz.ads import allow_current_folder
+
+    for name in (value if isinstance(value, tuple) else [value] if value else []):
+        allow_current_folder(name)
+    return value
 #: at most this many local workers per CPU: more only queue, each holding a SUMO and semaphores
 JOBS_PER_CPU = 4
 
@@ -148,7 +158,7 @@ def main() -> None:
 @main.command()
 @click.argument("scenario", type=click.Path())
 @click.option("--gui", is_flag=True, help="Show the run in sumo-gui (through traci; same code path).")
-@click.option("--ads", "ads_name", default=None, help="ADS plugin (default: the scenario's).")
+@click.option("--ads", "ads_name", default=None, callback=_ads_from_the_command_line, help="ADS plugin (default: the scenario's).")
 @click.option("--ads-option", multiple=True, metavar="K=V", help="ADS option, e.g. fault=speeding.")
 @click.option("--trace", "trace_out", type=click.Path(file_okay=False), help="Save the trace (Parquet) here.")
 @oracle_options
@@ -252,23 +262,6 @@ def seed(network, count, out, rng_seed, no_verify, force):
 
 
 # ---------------------------------------------------------------------------- fuzz
-def _progress_printer():
-    tty = sys.stderr.isatty()
-    last = [0.0]
-
-    def show(p):
-        now = time.monotonic()
-        if now - last[0] < (0.2 if tty else 10.0):
-            return
-        last[0] = now
-        best = "-" if p.best_risk is None else f"{p.best_risk:.2f}"
-        where = (f"seed {p.seed_index}  lineage {p.lineage}  cycle {p.cycle}" if p.jobs_running == 1
-                 else f"jobs {p.jobs_done}/{p.jobs_total} done, {p.jobs_running} running")
-        line = f"execs {p.execs}  {p.rate:.2f}/s  {where}  best risk {best}  findings {p.findings}"
-        click.echo(("\r" + line + "   ") if tty else line, err=True, nl=not tty)
-    return show
-
-
 @main.command()
 @click.argument("network", type=click.Path(), required=False)
 @click.option("-o", "out", type=click.Path(file_okay=False), help="Output directory (default: new under ./drivefuzz-out/).")
@@ -280,8 +273,8 @@ def _progress_printer():
 @click.option("--budget", default=None, help="Wall-clock budget of this run, e.g. 90s, 10m, 2h.")
 @click.option("--max-execs", type=click.IntRange(min=1), default=None, help="Stop after N executions (per run: a resume runs N more).")
 @click.option("--seed", "rng_seed", type=click.IntRange(min=0), default=None, help="Campaign RNG seed [0].")
-@click.option("--seeds", "seeds_dir", type=click.Path(file_okay=False), help="Seed folder (default seeds/<network>/).")
-@click.option("--ads", "ads_name", default=None, help="ADS plugin under test [ego].")
+@click.option("--seeds", "seeds_dir", type=click.Path(file_okay=False), help="Seed folder (default: <network's folder>/../seeds/<network>/, else ./seeds/<network>/).")
+@click.option("--ads", "ads_name", default=None, callback=_ads_from_the_command_line, help="ADS plugin under test [ego].")
 @click.option("--ads-option", multiple=True, metavar="K=V", help="ADS option, e.g. fault=speeding.")
 @click.option("--feedback", type=click.Choice(["risk", "paper", "random"]), default=None,
               help="How successors are chosen: the risk score, the paper's driving-quality score, or at random [risk].")
@@ -303,6 +296,7 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
     """Fuzz the ADS on NETWORK (a .net.xml). Exit 0: nothing found; 1: misbehaviour found; 2: bad input."""
     from drivefuzz.ads import check_trusted
     from drivefuzz.campaign.fuzz import Campaign, load_campaign, parse_duration
+    from drivefuzz.campaign.status import StatusPrinter
 
     argv = ["drivefuzz", *sys.argv[1:]]
     if resume_dir:
@@ -344,15 +338,19 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
     _writable_dir(out_dir, "-o")
     if not resume_dir:
         seeds = _seeds_for(network, seeds_dir)
-    campaign = Campaign(out_dir, seeds, cfg, argv, on_progress=_progress_printer())
+    campaign = Campaign(out_dir, seeds, cfg, argv)
     where = scheduler or ("local" if (jobs or 1) > 1 else None)
+    campaign.on_progress = status = StatusPrinter([campaign], None if scheduler else jobs or 1,
+                                                  f"drivefuzz fuzz -> {out_dir}")
     try:
         findings = _run_campaign(campaign, bool(resume_dir), where, jobs or 1)
     except KeyboardInterrupt:
+        status.close()
         findings = campaign.finish()
         _print_summary(campaign, findings, out_dir, report_all)
         click.echo("aborted", err=True)
         sys.exit(EXIT_ABORTED)
+    status.close()
     _print_summary(campaign, findings, out_dir, report_all)
     sys.exit(_exit_code(findings + (campaign.incidents if report_all else []), bool(campaign.failed_jobs)))
 
@@ -473,8 +471,22 @@ def _print_findings(title: str, findings) -> None:
         click.echo(f"{'':>38}{replay_command(f.path, f.ads)}")
 
 
-def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
-    """The seeds in ``seeds_dir`` (default ``seeds/<network>/``), or ``count`` new ones.
+def _seed_folder(network: Path, name: str, seeds_dir: str | None, seeds_root: Path | None) -> Path:
+    """Where a network's seeds are: ``--seeds``; else the first of ``<seeds_root>/<name>/`` (a campaign
+    file's ``seeds``), ``<network's folder>/../seeds/<name>/`` (the layout of this repository: a run from
+    any folder finds the network's own verified seeds) and ``./seeds/<name>/`` that holds seeds; else
+    ``./seeds/<name>/``, where new ones are generated."""
+    from drivefuzz.scenario.seed import list_seeds
+
+    if seeds_dir:
+        return Path(seeds_dir)
+    here = Path("seeds") / name
+    candidates = ([seeds_root / name] if seeds_root else []) + [network.resolve().parent.parent / "seeds" / name, here]
+    return next((c for c in candidates if c.is_dir() and list_seeds(c)), here)
+
+
+def _seeds_for(network: str, seeds_dir: str | None, count: int = 4, seeds_root: Path | None = None):
+    """The seeds of :func:`_seed_folder`, or ``count`` new ones.
 
     New seeds are written into that folder only when it is new or empty: a folder
     that holds something else is never written into (the campaign keeps its seeds
@@ -487,7 +499,7 @@ def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
     from drivefuzz.sim.verify import dry_run
 
     rmap = load_network(network)
-    folder = Path(seeds_dir) if seeds_dir else Path("seeds") / rmap.name
+    folder = _seed_folder(Path(network), rmap.name, seeds_dir, seeds_root)
     if folder.exists() and not folder.is_dir():
         raise InvalidConfig("--seeds", str(folder), "is a file", "a folder of seed scenarios (000/, 001/...)")
     found = list_seeds(folder) if folder.is_dir() else []
@@ -526,15 +538,16 @@ def _seeds_for(network: str, seeds_dir: str | None, count: int = 4):
 @click.argument("campaign_file", type=click.Path(), required=False)
 @click.option("-o", "out", type=click.Path(file_okay=False), help="Output directory (default: new under ./drivefuzz-out/).")
 @click.option("--resume", "resume_dir", type=click.Path(file_okay=False), help="Continue the batch in this directory.")
-@click.option("--ads", "trusted_ads", multiple=True, metavar="NAME",
+@click.option("--ads", "trusted_ads", multiple=True, callback=_ads_from_the_command_line, metavar="NAME",
               help="With --resume: an ADS of the batch's campaign.json that is not installed, to import it anyway.")
 @handle_errors
 def campaign(campaign_file, out, resume_dir, trusted_ads):
     """Run a batch: every cell of CAMPAIGN_FILE's matrix (networks x strategies x ADS x seeds) on Dask."""
-    from drivefuzz.campaign.batch import CampaignFile, cells, load_campaign_file, results_table, write_results
-    from drivefuzz.campaign.config import FINISHED
+    from drivefuzz.campaign.batch import (NO_EXECUTIONS, CampaignFile, cell_spent, cells, load_campaign_file,
+                                          results_table, write_results)
     from drivefuzz.campaign.cluster import BATCH_SYSTEMS, dask_client
     from drivefuzz.campaign.fuzz import Campaign, FuzzConfig, load_campaign, parse_duration, run_on_dask
+    from drivefuzz.campaign.status import StatusPrinter
     from drivefuzz.oracle import OracleSettings
     from drivefuzz.storage import atomic_write_json
 
@@ -573,25 +586,25 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
     budget_s = parse_duration(c.budget)
     argv = ["drivefuzz", *sys.argv[1:]]
     work, campaigns = [], []
-    totals = _batch_progress(campaigns)
+    where = spec.run.where
+    status = StatusPrinter(campaigns, spec.run.jobs if where == "local" else None, f"drivefuzz campaign -> {out_dir}")
     for name, network, strategy, ads, seed in cells(spec):
         cell_dir = out_dir / "cells" / name
         if (cell_dir / "manifest.json").exists():  # resuming: the cell's own seeds, wherever this runs from
             seeds = load_campaign(cell_dir)[0]
         else:
-            seeds = _seeds_for(network, None, count=c.seeds_per_network)[:c.seeds_per_network]
+            seeds = _seeds_for(network, None, c.seeds_per_network, spec.seeds_root)[:c.seeds_per_network]
         cfg = FuzzConfig(cycles=c.cycles, population=c.population, strategy=strategy, seed=seed, budget_s=budget_s,
                          max_execs=c.max_execs, feedback="random" if c.no_feedback else c.feedback,
                          continue_after_finding=c.continue_after_finding, ads=ads,
                          oracles=OracleSettings(settings=spec.oracles), mutation=spec.mutation, quality=spec.quality,
                          time_limit=c.time_limit, exec_timeout_s=c.exec_timeout)
-        camp = Campaign(cell_dir, seeds, cfg, argv, on_progress=totals)
-        spent = (cell_dir / FINISHED).exists()  # a cell that spent its budget in an earlier run is done
+        camp = Campaign(cell_dir, seeds, cfg, argv, on_progress=status)
+        spent = cell_spent(cell_dir)  # a cell that spent its budget in an earlier run is done
         pending = camp.prepare(resume=(cell_dir / "manifest.json").exists())
         work.append((camp, [] if spent else pending))
         campaigns.append(camp)
 
-    where = spec.run.where
     click.echo(f"{len(campaigns)} cell(s) on {where} -> {out_dir}", err=True)
     aborted = False
     try:
@@ -601,6 +614,7 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
     except KeyboardInterrupt:
         aborted = True
     finally:
+        status.close()
         for camp in campaigns:
             camp.finish()
         rows = results_table(out_dir, spec)
@@ -609,6 +623,9 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
     click.echo(f"{'cell':<44} {'execs':>6} {'found':>6} {'distinct':>8}  status")
     for r in rows:
         click.echo(f"{r['cell']:<44} {r['execs']:>6} {r['findings']:>6} {r['distinct']:>8}  {r['status']}")
+    for r in rows:
+        if r["execs"] == 0:
+            click.echo(f"{r['cell']} ({r['folder']}): {NO_EXECUTIONS}", err=True)
     click.echo(f"results in {out_dir / 'results.csv'}")
     if any(r["status"] != "done" for r in rows):
         click.echo(f"continue with: drivefuzz campaign --resume {out_dir}", err=True)
@@ -618,32 +635,11 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
     sys.exit(EXIT_FOUND if any(r["findings"] for r in rows) else (EXIT_INTERNAL if failed else EXIT_CLEAN))
 
 
-def _batch_progress(campaigns):
-    show = _progress_printer()
-
-    def update(_p):
-        from drivefuzz.campaign.fuzz import Progress
-
-        total = Progress(jobs_total=sum(c.progress.jobs_total for c in campaigns))
-        total.started = min((c.progress.started for c in campaigns), default=total.started)
-        for c in campaigns:
-            p = c.progress
-            total.execs += p.execs
-            total.new_execs += p.new_execs
-            total.findings += p.findings
-            total.jobs_done += p.jobs_done
-            total.jobs_running += p.jobs_running
-            if p.best_risk is not None and (total.best_risk is None or p.best_risk > total.best_risk):
-                total.best_risk = p.best_risk
-        show(total)
-    return update
-
-
 # -------------------------------------------------------------------------- replay
 @main.command()
 @click.argument("finding", type=click.Path())
 @click.option("--gui", is_flag=True, help="Show the run in sumo-gui.")
-@click.option("--ads", "ads_name", default=None, metavar="NAME",
+@click.option("--ads", "ads_name", default=None, callback=_ads_from_the_command_line, metavar="NAME",
               help="The finding's ADS when it is not an installed plugin (package.module:Class): import it anyway.")
 @handle_errors
 def replay(finding, gui, ads_name):

@@ -43,15 +43,17 @@ def test_small_campaign_runs_every_cell_and_resumes(tmp_path):
     result = CliRunner().invoke(main, ["campaign", str(spec_file), "-o", str(out)])
     assert result.exit_code == 1, result.output  # the faulty ADS is found speeding
     rows = list(csv.DictReader((out / "results.csv").open()))
-    assert [r["cell"] for r in rows] == ["town-all-ego-f1bffd-s0", "town-entropy-ego-f1bffd-s0"]
+    assert [r["cell"] for r in rows] == ["town all ego fault=speeding seed 0", "town entropy ego fault=speeding seed 0"]
+    assert [r["folder"] for r in rows] == ["cells/town-all-ego-f1bffd-s0", "cells/town-entropy-ego-f1bffd-s0"]
     for r in rows:
         assert r["status"] == "done" and int(r["execs"]) >= 1 and int(r["findings"]) >= 1
-        assert (out / "cells" / r["cell"] / "index.sqlite").exists()
+        assert (out / r["folder"] / "index.sqlite").exists()
     assert any("speeding:" in r["by_oracle"] for r in rows)
-    before = {p.name for r in rows for p in (out / "cells" / r["cell"] / "findings").iterdir()}
+    assert "town all ego fault=speeding seed 0" in (out / "results.md").read_text()
+    before = {p.name for r in rows for p in (out / r["folder"] / "findings").iterdir()}
     again = CliRunner().invoke(main, ["campaign", "--resume", str(out)])
     assert again.exit_code == 1, again.output
-    after = {p.name for r in rows for p in (out / "cells" / r["cell"] / "findings").iterdir()}
+    after = {p.name for r in rows for p in (out / r["folder"] / "findings").iterdir()}
     assert after == before  # every cell was done: nothing re-run, nothing lost
 
 
@@ -113,3 +115,49 @@ def test_a_batch_system_that_is_not_installed_is_one_line(tmp_path):
     result = CliRunner().invoke(main, ["campaign", str(f), "-o", str(tmp_path / "o")])
     assert result.exit_code == 2 and "sbatch" in result.output and len(result.output.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()  # nothing written: the fixed file can use the same directory
+
+
+STARVING = f"""
+[campaign]
+budget = "3s"
+cycles = 2
+population = 2
+seeds_per_network = 1
+time_limit = 20
+
+[matrix]
+networks = ["{ROOT / 'networks' / 'intersection.net.xml'}"]
+strategies = ["all", "entropy"]
+seeds = [0]
+
+[run]
+where = "local"
+jobs = 1
+"""
+
+
+def test_a_cell_budget_counts_from_its_first_job_not_from_the_queue(tmp_path):
+    """Two cells on one worker: the second cell's jobs wait for the first cell's; its 3 s start when they run
+    (counted from submission, the second cell ran nothing). A cell that ran nothing is flagged and resumed."""
+    import shutil
+
+    spec_file = tmp_path / "c.toml"
+    spec_file.write_text(STARVING)
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["campaign", str(spec_file), "-o", str(out)])
+    assert result.exit_code in (0, 1), result.output
+    rows = list(csv.DictReader((out / "results.csv").open()))
+    assert len(rows) == 2 and all(int(r["execs"]) >= 1 for r in rows), rows
+    assert "WARNING" not in result.output
+    starved = out / rows[1]["folder"]  # as an earlier version left it: finished, with nothing run
+    for sub in ("jobs", "corpus", "findings", "incidents", "budget"):
+        shutil.rmtree(starved / sub, ignore_errors=True)
+    (starved / "index.sqlite").unlink()
+    (starved / "finished.json").write_text(json.dumps({"reason": "the time budget of 3s was spent", "executions": 0}))
+    from drivefuzz.campaign.batch import results_table
+
+    assert "WARNING: no executions" in results_table(out, load_campaign_file(spec_file))[1]["status"]
+    again = CliRunner().invoke(main, ["campaign", "--resume", str(out)])
+    assert again.exit_code in (0, 1), again.output
+    rows = list(csv.DictReader((out / "results.csv").open()))
+    assert int(rows[1]["execs"]) >= 1 and "WARNING" not in rows[1]["status"], rows

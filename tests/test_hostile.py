@@ -1,12 +1,16 @@
-"""Hostile input: every case gives exit 2, one line on stderr naming the file (or option), no traceback.
+"""Hostile input (issue 15): every case gives exit 2, one line on stderr naming the file (or option), no traceback.
 
-The cases are generated from the categories of issue 15: scenario bounds, broken
-networks (SUMO would segfault or refuse them), config files of the wrong types,
-out-of-range options, damaged campaign and finding folders, outputs that cannot
-be written. Each builds its input in a fresh folder and runs the real CLI in
-this process (none gets as far as SUMO). The security routes (code named by a
-data file, or lying in the folder drivefuzz starts from) run the CLI as a user
-would, in a process of its own, and check that a marker file was not created.
+The cases are generated from the categories of issue 15: scenario folders out of
+bounds, broken networks (SUMO would segfault or refuse them), config files and
+campaign files of the wrong types, out-of-range command-line options, damaged
+campaign, batch and finding folders, outputs that cannot be written. Each builds
+its input in a fresh folder and runs the real CLI in this process (none gets as
+far as SUMO), from that folder: nothing may be written there but under the
+output directory, and nothing may be left in the (test's own) temporary folder.
+The networks that made SUMO segfault also run in a process of their own (no
+signal death). The security routes (code named by a data file, or lying in the
+folder drivefuzz starts from) run the CLI as a user would, in a process of its
+own, and check that a marker file was not created.
 """
 
 from __future__ import annotations
@@ -374,21 +378,82 @@ def _campaign_file_case(text, needle):
     return run
 
 
-CAMPAIGN_CASES = [
-    Case("campaign-deep-toml", _campaign_file_case(DEEP_TOML, "camp.toml")),
-    Case("campaign-bad-type", _campaign_file_case('[matrix]\nnetworks = 5\n', "camp.toml")),
+NET_LINE = f'[matrix]\nnetworks = ["{TOWN}"]\n'
+CAMPAIGN_FILES = {  # a campaign file's text -> what the line names besides the file
+    "deep-toml": (DEEP_TOML, "nested too deeply"),
+    "not-toml": ("[matrix\nnetworks = ", "cannot parse"),
+    "binary": ("\x00\xff" * 50, "camp.toml"),
+    "no-matrix": ("[campaign]\ncycles = 2\n", "matrix"),
+    "networks-5": ("[matrix]\nnetworks = 5\n", "matrix.networks"),
+    "networks-empty": ("[matrix]\nnetworks = []\n", "matrix.networks"),
+    "network-missing": ('[matrix]\nnetworks = ["nowhere.net.xml"]\n', "matrix.networks"),
+    "unknown-section": (NET_LINE + "[nope]\nx = 1\n", "nope"),
+    "unknown-key": (NET_LINE + "[campaign]\nbudgett = '1m'\n", "campaign.budgett"),
+    "budget-soon": (NET_LINE + "[campaign]\nbudget = 'soon'\n", "campaign.budget"),
+    "exec-timeout-inf": (NET_LINE + "[campaign]\nexec_timeout = inf\n", "campaign.exec_timeout"),
+    "cycles-0": (NET_LINE + "[campaign]\ncycles = 0\n", "campaign.cycles"),
+    "seeds-folder-missing": (NET_LINE + "[campaign]\nseeds = 'nowhere'\n", "campaign.seeds"),
+    "strategy": (NET_LINE + "strategies = ['chaos']\n", "matrix.strategies"),
+    "ads-missing": (NET_LINE + "ads = [{name = 'nosuchads'}]\n", "matrix.ads"),
+    "ads-option": (NET_LINE + "ads = [{name = 'ego', options = {fault = 'bogus'}}]\n", "matrix.ads"),
+    "cells-clash": (NET_LINE + "seeds = [0, 0]\n", "share the directory"),
+    "where-moon": (NET_LINE + "[run]\nwhere = 'moon'\n", "run.where"),
+    "jobs-0": (NET_LINE + "[run]\njobs = 0\n", "run.jobs"),
+    "cluster-cores-0": (NET_LINE + "[cluster]\ncores = 0\n", "cluster.cores"),
+    "oracle-setting": (NET_LINE + "[oracles.speeding]\ntolerance = 'x'\n", "speeding.tolerance"),
+}
+CAMPAIGN_CASES = [Case(f"campaign-{key}", _campaign_file_case(text, needle))
+                  for key, (text, needle) in CAMPAIGN_FILES.items()]
+
+
+def _batch_resume_case(content: str, needle: str):
+    """``drivefuzz campaign --resume DIR`` of a batch folder whose campaign.json is damaged."""
+    def run(tmp):
+        d = tmp / "batch"
+        d.mkdir()
+        (d / "campaign.json").write_text(content)
+        return ["campaign", "--resume", d], needle
+    return run
+
+
+GOOD_BATCH = {"matrix": {"networks": [str(TOWN)]}}
+BATCH_CASES = [
+    Case("batch-json-garbage", _batch_resume_case("\x00garbage", "campaign.json")),
+    Case("batch-json-list", _batch_resume_case("[]", "campaign.json")),
+    Case("batch-json-deep", _batch_resume_case(DEEP_JSON, "campaign.json")),
+    Case("batch-json-types", _batch_resume_case(json.dumps({"matrix": {"networks": 5}}), "campaign.json")),
+    Case("batch-ads-not-installed", _batch_resume_case(json.dumps(
+        GOOD_BATCH | {"matrix": {"networks": [str(TOWN)], "ads": [{"name": "evil_mod:X"}]}}), "campaign.json")),
+    Case("batch-no-campaign-json", lambda tmp: (["campaign", "--resume", tmp], str(tmp))),
 ]
 
-CASES = SCENARIO_CASES + NETWORK_CASES + CONFIG_CASES + OPTION_CASES + OUTPUT_CASES + REPLAY_CASES + CAMPAIGN_CASES
+CASES = (SCENARIO_CASES + NETWORK_CASES + CONFIG_CASES + OPTION_CASES + OUTPUT_CASES + REPLAY_CASES
+         + CAMPAIGN_CASES + BATCH_CASES)
+
+
+@pytest.fixture
+def private_tmp(tmp_path, monkeypatch):
+    """The system's temporary folder of this test alone (other processes share /tmp): nothing may be left there."""
+    import tempfile
+
+    folder = tmp_path.parent / f"{tmp_path.name}-systmp"
+    folder.mkdir()
+    monkeypatch.setenv("TMPDIR", str(folder))
+    monkeypatch.setattr(tempfile, "tempdir", None)  # read TMPDIR again
+    yield folder
+    tempfile.tempdir = None
 
 
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
-def test_one_line_and_exit_2(case, tmp_path):
+def test_one_line_and_exit_2(case, tmp_path, private_tmp):
+    """Every generated case: exit 2, one line naming the file (or option), no traceback; nothing written in
+    the current folder (the test's folder) but under the output directory ``o``, nothing left in /tmp."""
     args, needle = case.run(tmp_path)
     before = _snapshot(tmp_path)
     assert_one_line(invoke(args, cwd=tmp_path), needle)
     written = {p for p in _snapshot(tmp_path) - before if p != "o" and not p.startswith("o/")}
     assert not written, written  # nothing written outside the output directory
+    assert not list(private_tmp.iterdir()), list(private_tmp.iterdir())
 
 
 @pytest.mark.parametrize("case", RESUME_CASES, ids=[c.id for c in RESUME_CASES])
@@ -436,12 +501,15 @@ def test_seeds_are_not_written_into_a_foreign_default_folder(tmp_path, monkeypat
     from drivefuzz.scenario.sumofiles import load_scenario
 
     monkeypatch.chdir(tmp_path)
+    net = tmp_path / "a" / "b" / "town.net.xml"  # no seeds next to it
+    net.parent.mkdir(parents=True)
+    shutil.copy(TOWN, net)
     foreign = tmp_path / "seeds" / "town"
     foreign.mkdir(parents=True)
     (foreign / "notes.txt").write_text("mine")
     new = load_scenario(SEEDS / "000")
     monkeypatch.setattr("drivefuzz.scenario.seed.generate_seeds", lambda *a, **k: [new])  # no dry runs
-    assert cli._seeds_for(str(TOWN), None) == [new]
+    assert cli._seeds_for(str(net), None) == [new]
     assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"]
 
 
@@ -492,3 +560,25 @@ def test_a_campaign_folder_cannot_name_code_to_import(tmp_path, campaign_templat
     r = _user_cli(["fuzz", "--resume", ".", "--max-execs", "1"], cwd=out)
     assert r.returncode == 2 and "manifest.json" in r.stderr and len(r.stderr.splitlines()) == 1, r.stderr
     assert not marker.exists()
+
+
+def test_a_batch_folder_cannot_name_code_to_import(tmp_path):
+    """campaign --resume of a downloaded batch whose campaign.json names an ADS module lying beside it."""
+    d = tmp_path / "batch"
+    d.mkdir()
+    (d / "campaign.json").write_text(json.dumps({"matrix": {"networks": [str(TOWN)], "ads": [{"name": "evil_mod:X"}]}}))
+    marker = _plant(d)
+    r = _user_cli(["campaign", "--resume", "."], cwd=d)
+    assert r.returncode == 2 and "--ads evil_mod:X to trust it" in r.stderr and len(r.stderr.splitlines()) == 1, r.stderr
+    assert not marker.exists()
+
+
+@pytest.mark.parametrize("name", ["lane-index-7", "lane-speed-nan"])
+def test_networks_that_crashed_sumo_are_one_line_in_a_process_of_their_own(tmp_path, name):
+    """The networks that made SUMO segfault (exit 139, no message): as a user runs drivefuzz, exit 2 and one
+    line naming the network, with no signal death."""
+    net = bad_network(tmp_path, NETWORK_MUTATIONS[name])
+    r = _user_cli(["run", scenario_on(tmp_path, net)], cwd=tmp_path)
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "bad.net.xml" in lines[0] and "Traceback" not in r.stderr, r.stderr

@@ -9,7 +9,9 @@ per cell. ``drivefuzz campaign --resume DIR`` continues it. Example::
     budget = "10m"            # wall-clock budget of each cell (and/or max_execs)
     cycles = 10
     population = 8
-    seeds_per_network = 8     # seed missions per network (seeds/<net>/, generated when missing)
+    seeds_per_network = 8     # seed missions per network (generated when missing)
+    seeds = "../seeds"        # optional: a folder with seeds/<net>/ per network (default: next to the
+                              # network, <its folder>/../seeds/<net>/, then ./seeds/<net>/)
 
     [matrix]
     networks = ["networks/town.net.xml", "networks/highway.net.xml"]
@@ -48,6 +50,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from drivefuzz.campaign.cluster import BATCH_SYSTEMS, BatchSpec
 from drivefuzz.campaign.config import FINISHED
+from drivefuzz.campaign.configfile import MAX_EXEC_TIMEOUT_S
 from drivefuzz.errors import InvalidConfig
 from drivefuzz.search.mutate import MutationConfig
 from drivefuzz.search.quality import QualityConfig
@@ -57,7 +60,7 @@ STRATEGIES = ("all", "congestion", "entropy", "instability", "maneuver", "mix")
 
 
 class _Strict(BaseModel):
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
 
 
 class CampaignSection(_Strict):
@@ -66,11 +69,13 @@ class CampaignSection(_Strict):
     cycles: int = Field(default=10, ge=1)
     population: int = Field(default=8, ge=1)
     seeds_per_network: int = Field(default=8, ge=1)
-    time_limit: float | None = Field(default=None, gt=0)
+    seeds: str | None = Field(default=None, description="a folder of seed folders, one per network name "
+                              "(<seeds>/<net>/NNN/); default: <network's folder>/../seeds/<net>/, then ./seeds/<net>/")
+    time_limit: float | None = Field(default=None, gt=0, le=MAX_EXEC_TIMEOUT_S)
     continue_after_finding: bool = False
     no_feedback: bool = False
     feedback: Literal["risk", "paper", "random"] = "risk"
-    exec_timeout: float = Field(default=300.0, gt=0)
+    exec_timeout: float = Field(default=300.0, gt=0, le=MAX_EXEC_TIMEOUT_S)
 
 
 class MatrixSection(_Strict):
@@ -94,6 +99,10 @@ class CampaignFile(_Strict):
     oracles: dict[str, dict[str, Any]] = Field(default_factory=dict)
     mutation: MutationConfig = Field(default_factory=MutationConfig)
     quality: QualityConfig = Field(default_factory=QualityConfig)
+
+    @property
+    def seeds_root(self) -> Path | None:
+        return Path(self.campaign.seeds) if self.campaign.seeds else None
 
 
 def load_campaign_file(path: str | Path) -> CampaignFile:
@@ -127,6 +136,12 @@ def load_campaign_file(path: str | Path) -> CampaignFile:
             raise InvalidConfig(str(path), "matrix.networks", f"no such network {n!r}", "paths to .net.xml files")
         nets.append(str(p.resolve()))
     spec.matrix.networks = nets
+    if spec.campaign.seeds is not None:
+        root = Path(spec.campaign.seeds) if Path(spec.campaign.seeds).is_absolute() else base / spec.campaign.seeds
+        if not root.is_dir():
+            raise InvalidConfig(str(path), "campaign.seeds", f"no such folder {spec.campaign.seeds!r}",
+                                "a folder with one folder of seeds per network name (seeds/<net>/000/...)")
+        spec.campaign.seeds = str(root.resolve())
     from drivefuzz.ads import load_ads
     from drivefuzz.campaign.fuzz import parse_duration
 
@@ -144,7 +159,14 @@ def load_campaign_file(path: str | Path) -> CampaignFile:
     return spec
 
 
+def cell_label(network: str, strategy: str, ads: AdsSpec, seed: int) -> str:
+    """The cell as a person reads it in the results: ``town all ego fault=no_traffic_lights seed 0``."""
+    opts = "".join(f" {k}={v}" for k, v in sorted(ads.options.items()))
+    return f"{Path(network).name.split('.')[0]} {strategy} {ads.name}{opts} seed {seed}"
+
+
 def cell_name(network: str, strategy: str, ads: AdsSpec, seed: int) -> str:
+    """The cell's folder under ``cells/``: safe on any filesystem (options become a short hash)."""
     opts = ""
     if ads.options:
         opts = "-" + hashlib.sha1(json.dumps(ads.options, sort_keys=True).encode()).hexdigest()[:6]
@@ -157,6 +179,20 @@ def cells(spec: CampaignFile) -> list[tuple[str, str, str, AdsSpec, int]]:
     return [(cell_name(n, s, a, k), n, s, a, k) for n, s, a, k in itertools.product(m.networks, m.strategies, m.ads, m.seeds)]
 
 
+#: the warning of a cell that ran nothing (its jobs never got a worker, or failed before their first execution)
+NO_EXECUTIONS = "WARNING: no executions (resume the batch to run it)"
+
+
+def cell_spent(cell_dir: Path) -> bool:
+    """Whether a cell ended its run by spending its budget. One that ran nothing did not (a starved cell of an
+    earlier version wrote finished.json with 0 executions): a resume runs it."""
+    try:
+        finished = json.loads((cell_dir / FINISHED).read_text())
+    except (OSError, ValueError, RecursionError):
+        return False
+    return isinstance(finished, dict) and finished.get("executions") != 0
+
+
 def results_table(out: Path, spec: CampaignFile) -> list[dict[str, Any]]:
     """One row per cell from the cells' own directories (so it is right after a resume too)."""
     import sqlite3
@@ -164,7 +200,8 @@ def results_table(out: Path, spec: CampaignFile) -> list[dict[str, Any]]:
     rows = []
     for name, network, strategy, ads, seed in cells(spec):
         d = out / "cells" / name
-        row: dict[str, Any] = {"cell": name, "network": Path(network).name, "strategy": strategy, "ads": ads.name,
+        row: dict[str, Any] = {"cell": cell_label(network, strategy, ads, seed), "folder": f"cells/{name}",
+                               "network": Path(network).name, "strategy": strategy, "ads": ads.name,
                                "ads_options": json.dumps(ads.options, sort_keys=True), "seed": seed,
                                "execs": 0, "findings": 0, "distinct": 0, "incidents": 0, "by_oracle": "",
                                "status": "not started"}
@@ -189,10 +226,12 @@ def results_table(out: Path, spec: CampaignFile) -> list[dict[str, Any]]:
             row["by_oracle"] = " ".join(f"{k}:{v}" for k, v in sorted(counts.items()))
             manifest = json.loads((d / "manifest.json").read_text())
             done = sum((d / "jobs" / f"{i:03d}" / "summary.json").exists() for i in range(len(manifest["seeds"])))
-            if (d / FINISHED).exists():  # the run ended by spending its budget (or its single pass)
+            if cell_spent(d):  # the run ended by spending its budget (or its single pass)
                 row["status"] = "done"
             else:
                 row["status"] = "done" if done == len(manifest["seeds"]) else f"{done}/{len(manifest['seeds'])} seeds done"
+        if row["execs"] == 0:
+            row["status"] += f"; {NO_EXECUTIONS}"
         rows.append(row)
     return rows
 
@@ -209,7 +248,7 @@ def write_results(out: Path, rows: list[dict[str, Any]]) -> None:
     w.writeheader()
     w.writerows(rows)
     atomic_write_text(out / "results.csv", buf.getvalue())
-    cols = ["cell", "execs", "findings", "distinct", "incidents", "by_oracle", "status"]
+    cols = ["cell", "folder", "execs", "findings", "distinct", "incidents", "by_oracle", "status"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(str(r[c]) for c in cols) + " |" for r in rows]
     atomic_write_text(out / "results.md", "\n".join(lines) + "\n")

@@ -100,6 +100,9 @@ class Progress:
     jobs_done: int = 0
     jobs_running: int = 0
     started: float = field(default_factory=time.monotonic)
+    last_exec_at: float = 0.0  # [s, monotonic] when the last execution was indexed (0: none yet)
+    last_finding: str | None = None  # the signature of the finding indexed last
+    last_finding_at: float = 0.0  # [s, monotonic]
 
     @property
     def rate(self) -> float:
@@ -148,6 +151,9 @@ class Campaign:
         self._offsets: dict[int, int] = {}
         self._deadline: float | None = None
         self._rounds: dict[int, int] = {}  # Dask submissions per seed job
+        self._attempts: dict[int, int] = {}  # attempt records of this run per seed job (one per job started)
+        self._attempts_at_submit: dict[int, int] = {}  # the same when its current Dask round was submitted
+        self._clock_armed = False  # attempts read while preparing are an earlier run's
 
     # ------------------------------------------------------------- directory
     def prepare(self, resume: bool) -> list[int]:
@@ -175,7 +181,9 @@ class Campaign:
         self.db = open_index(self.out / "index.sqlite")  # derived data: rebuilt from the journals
         self._offsets = {}
         self.findings, self.incidents, self.progress.execs, self.progress.findings = [], [], 0, 0
+        self._clock_armed = False
         self.poll(quiet=True)
+        self._attempts, self._clock_armed = {}, True
         self.progress.new_execs = 0
         self.progress.started = time.monotonic()
         pending = [i for i in range(len(self.seeds)) if not (job_dir(self.out, i) / "summary.json").exists()]
@@ -200,15 +208,34 @@ class Campaign:
                     rec = json.loads(line)
                 except (ValueError, RecursionError):  # torn by a kill, then appended after
                     continue
-                if journal_problem(rec) is None and rec.get("event") == "end":
+                if journal_problem(rec) is not None:
+                    continue
+                if rec["event"] == "end":
                     self._index(self._checked_finding(rec))
                     new += 1
+                elif rec["event"] == "attempt" and self._clock_armed:
+                    self._job_started(si, rec)
         if new:
             self.db.commit()
             self.progress.new_execs += new
             if not quiet:
                 self.on_progress(self.progress)
         return new
+
+    def _job_started(self, si: int, rec: dict[str, Any]) -> None:
+        """A job of this run began to run (its attempt record): the wall-clock budget counts from the first,
+        not from submission, so a campaign whose jobs wait for a worker (a batch cell) is not starved."""
+        self._attempts[si] = self._attempts.get(si, 0) + 1
+        if self._deadline is None and self.cfg.budget_s is not None:
+            began = rec.get("time")
+            waited = max(0.0, time.time() - began) if isinstance(began, (int, float)) else 0.0
+            self._deadline = time.monotonic() - waited + self.cfg.budget_s
+            self.progress.started = time.monotonic() - waited
+
+    def jobs_running(self, submitted: list[int]) -> int:
+        """How many of the seed jobs with a Dask round in flight (``submitted``) have begun to run: Dask's
+        'processing' also counts a round that only waits on a worker, so it is read from the journals."""
+        return sum(1 for si in submitted if self._attempts.get(si, 0) > self._attempts_at_submit.get(si, 0))
 
     def _index(self, rec: dict[str, Any]) -> None:
         row = [json.dumps(rec.get(k, {})) if k in ("components", "timings") else rec.get(k) for _, k in COLUMNS]
@@ -217,6 +244,7 @@ class Campaign:
             return
         p = self.progress
         p.execs += 1
+        p.last_exec_at = time.monotonic()
         p.seed_index, p.cycle, p.lineage = rec["seed_index"], rec["cycle"], rec.get("lineage", 0)
         if rec.get("risk") is not None and (p.best_risk is None or rec["risk"] > p.best_risk):
             p.best_risk = rec["risk"]
@@ -228,6 +256,8 @@ class Campaign:
                     known.hits += 1
                 elif (path / "verdict.json").is_file():
                     kept.append(load_finding(path))
+                    if col == "finding":
+                        p.last_finding, p.last_finding_at = kept[-1].label, p.last_exec_at
         p.findings, p.incidents = len(self.findings), len(self.incidents)
 
     def _checked_finding(self, rec: dict[str, Any]) -> dict[str, Any]:
@@ -251,12 +281,22 @@ class Campaign:
             self.stop_reason = self.stop_reason or "stopped on request (Ctrl-C)"
             return True
         if self._deadline is not None and time.monotonic() >= self._deadline:
-            self.stop_reason = self.stop_reason or f"the time budget of {_duration(self.cfg.budget_s)} was spent"
+            self.stop_reason = self.stop_reason or f"the time budget of {format_duration(self.cfg.budget_s)} was spent"
             return True
         if self.cfg.max_execs is not None and self.progress.new_execs >= self.cfg.max_execs:
             self.stop_reason = self.stop_reason or f"--max-execs {self.cfg.max_execs} executions were run"
             return True
         return False
+
+    def seconds_left(self) -> float | None:
+        """[s] of the time budget left (all of it before the first job runs); None without one."""
+        if self.cfg.budget_s is None:
+            return None
+        return self.cfg.budget_s if self._deadline is None else max(0.0, self._deadline - time.monotonic())
+
+    def execs_left(self) -> int | None:
+        """Executions of --max-execs left in this run; None without it."""
+        return None if self.cfg.max_execs is None else max(0, self.cfg.max_execs - self.progress.new_execs)
 
     def request_stop(self) -> None:
         (self.out / STOP_FILE).touch()
@@ -314,13 +354,13 @@ class Campaign:
                     return
 
     def submit(self, client, pending: list[int]) -> dict[Any, int]:
-        """Submit the pending seed jobs to Dask; the budget clock starts when this is called."""
-        self._deadline = None if self.cfg.budget_s is None else time.monotonic() + self.cfg.budget_s
+        """Submit the pending seed jobs to Dask; the budget clock starts when the first of them runs."""
         return {self.resubmit(client, si): si for si in pending}
 
     def resubmit(self, client, si: int):
         """One more round (lineage) of seed job ``si`` on Dask."""
         self._rounds[si] = self._rounds.get(si, 0) + 1
+        self._attempts_at_submit[si] = self._attempts.get(si, 0)
         tag = f"{self.out.resolve().name}-{os.getpid()}"
         return client.submit(run_seed_job, str(self.out.resolve()), si,
                              key=f"drivefuzz-{tag}-seed{si:03d}-round{self._rounds[si]}", pure=False, retries=1)
@@ -329,8 +369,10 @@ class Campaign:
 def run_on_dask(client, work: list[tuple[Campaign, list[int]]], max_running: int | None = None) -> None:
     """Run the pending jobs of several campaigns on one Dask client, following their journals.
 
-    Campaigns start in order, at most ``max_running`` at once (all by default), so
-    that each one's wall-clock budget is spent on the cluster, not in a queue.
+    Campaigns start in order, at most ``max_running`` at once (all by default). Each
+    one's wall-clock budget counts from when its first job begins to run (the job's
+    attempt record in its journal), so a campaign whose jobs wait in the queue
+    behind others' is not starved.
     Only this process writes the campaigns' indexes.
     """
     from distributed import wait
@@ -372,10 +414,9 @@ def run_on_dask(client, work: list[tuple[Campaign, list[int]]], max_running: int
                     campaign.progress.jobs_done += 1
                 elif summary["status"] == "yielded" and not campaign.out_of_budget():
                     active[campaign.resubmit(client, si)] = (campaign, si)
-            busy = {key for keys in client.processing().values() for key in keys}
             for campaign in list(running):
-                left = [f for f, (c, _) in active.items() if c is campaign]
-                campaign.progress.jobs_running = sum(1 for f in left if f.key in busy)
+                left = [si for c, si in active.values() if c is campaign]
+                campaign.progress.jobs_running = campaign.jobs_running(left)
                 campaign.on_progress(campaign.progress)
                 if not left:
                     campaign.poll()  # what the last jobs journalled after the poll above
@@ -506,7 +547,8 @@ def load_campaign(out: str | os.PathLike) -> tuple[list[Scenario], FuzzConfig, l
     return seeds, cfg, list(manifest.command)
 
 
-def _duration(seconds: float | None) -> str:
+def format_duration(seconds: float | None) -> str:
+    """``1h2m``, ``3m5s``, ``42s``: the inverse of :func:`parse_duration`."""
     if seconds is None:
         return "none"
     m, s = divmod(int(round(seconds)), 60)

@@ -12,8 +12,10 @@ no driver could get out of. After every placement, position, timing or speed cha
   while the ego can still stop before it (careful braking ``EGO_DECEL`` after ``REACTION``);
 - **obstacles are not at the start**: an immobile actor stands at least ``MutationConfig.immobile_min_range``
   metres ahead of the ego's start along its route (or behind it);
-- **obstacles leave a way on**: an immobile vehicle on the ego's route does not stand in a junction's exit,
-  and leaves another lane that leads on along the route, or room to pass it and merge back.
+- **obstacles leave a way on**: an immobile vehicle on the ego's route (or a walker standing or walking on a
+  lane cars use, as on networks without sidewalks) does not stand in a junction's exit, and leaves another
+  lane that leads on along the route, or room to pass it and merge back; on the goal's road it stands beyond
+  the goal or leaves another lane.
 
 The ego's expected motion comes from the mutator's profile of how the reference ADS drives the empty route
 (:meth:`drivefuzz.search.mutate.Mutator._ego_profile`). Never imports libsumo.
@@ -79,6 +81,9 @@ def unfair(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
             return _jaywalker(mut, sc, actor, d)
         if actor.nav is NavType.IMMOBILE and d is not None and 0.0 <= d < mut.cfg.immobile_min_range:
             return f"stands {d:.1f} m ahead of the ego's start"
+        if actor.nav in (NavType.IMMOBILE, NavType.AUTOPILOT) and d is not None and d > 0.0 \
+                and mut.rmap.lane(actor.start_lane).allows(PASSENGER):  # no sidewalk: a slow obstacle
+            return _blocks_the_route(mut, sc, actor)
         return None
     if d is None:
         return None
@@ -117,12 +122,15 @@ def _blocks_the_route(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
     i = route.index(edge)
     if i > 0 and actor.start_pos < JUNCTION_EXIT:
         return f"stands {actor.start_pos:.1f} m into {edge}, in the exit of the junction the ego comes through"
-    if i + 1 >= len(route):
-        return None  # the goal edge: the goal may lie before it
+    others = [l for l in rmap.edge(edge).getLanes() if l.allows(PASSENGER) and l.getID() != actor.start_lane]
+    if i + 1 >= len(route):  # the goal's road: the way on is another lane, or the goal lies before the obstacle
+        if others or actor.start_pos - VEHICLE_LENGTH > sc.mission.goal_pos + MARGIN:
+            return None
+        return f"blocks {edge}, a road of one lane, before the ego's goal at {sc.mission.goal_pos:.1f} m"
     leads = {fl for fl, _tl, _via in rmap.connections(edge, route[i + 1])}
     if leads - {actor.start_lane}:
         return None  # another lane leads on
-    if not [l for l in rmap.edge(edge).getLanes() if l.allows(PASSENGER) and l.getID() != actor.start_lane]:
+    if not others:
         return f"blocks {edge}, a road of one lane on the ego's route"
     room = rmap.lane(actor.start_lane).getLength() - actor.start_pos
     if room < MERGE_ROOM:
