@@ -29,13 +29,15 @@ def test_the_same_campaign_seed_gives_the_same_index(tmp_path, town_scenario):
     assert [[r[k] for k in fields] for r in a] == [[r[k] for k in fields] for r in b]
 
 
-def test_two_feedbacks_diverge_after_their_first_different_selection(tmp_path, town_scenario):
+def _diverged(out, seed: int, town_scenario) -> int:
+    """Run both feedbacks with campaign seed ``seed``; assert that every cycle whose parents differ has no
+    child in common, and return how many such cycles there were."""
     runs = {}
     for fb in ("risk", "random"):
-        cfg = FuzzConfig(cycles=3, population=4, seed=2, max_execs=13, feedback=fb, continue_after_finding=True,
+        cfg = FuzzConfig(cycles=3, population=4, seed=seed, max_execs=13, feedback=fb, continue_after_finding=True,
                          reproduce=0)
-        Campaign(tmp_path / fb, [_seed(town_scenario)], cfg).run()
-        runs[fb] = _ends(tmp_path / fb)
+        Campaign(out / f"{fb}-{seed}", [_seed(town_scenario)], cfg).run()
+        runs[fb] = _ends(out / f"{fb}-{seed}")
     risk, rnd = runs["risk"], runs["random"]
     # the seed's run and the first cycle come from the seed with the same random streams: the same scenarios
     assert [r["hash"] for r in risk[:5]] == [r["hash"] for r in rnd[:5]]
@@ -47,7 +49,12 @@ def test_two_feedbacks_diverge_after_their_first_different_selection(tmp_path, t
             compared += 1
             assert not ({r["hash"] for r in risk if r["cycle"] == cycle}
                         & {r["hash"] for r in rnd if r["cycle"] == cycle})
-    assert compared
+    return compared
+
+
+def test_two_feedbacks_diverge_after_their_first_different_selection(tmp_path, town_scenario):
+    # a random pick may choose the riskiest member too; the next campaign seed then tries again
+    assert any(_diverged(tmp_path, seed, town_scenario) for seed in (2, 3, 4, 5))
 
 
 def test_a_budget_is_spent_across_lineages_and_the_reason_is_given(tmp_path, town_scenario):

@@ -228,17 +228,36 @@ class Mutator(RoutePlacement):
         if len(sc.actors) >= self.cfg.max_actors:
             return Mutation(sc, f"no actor added (limit of {self.cfg.max_actors} reached)")
         if strategy == "congestion":
-            return self.add_actor(sc, rng, self._kind(sc, rng), NavType.AUTOPILOT)
+            kind = self._kind(sc, rng)
+            other = ActorKind.VEHICLE if kind is ActorKind.PEDESTRIAN else ActorKind.PEDESTRIAN
+            return self._first_feasible(sc, rng, [(kind, NavType.AUTOPILOT), (other, NavType.AUTOPILOT)])
         if strategy == "entropy":
             nav = NavType.LINEAR if rng.random() < self.cfg.entropy_linear_share else NavType.IMMOBILE
-            return self.add_actor(sc, rng, self._kind(sc, rng), nav)
+            kind = self._kind(sc, rng)
+            other = NavType.IMMOBILE if nav is NavType.LINEAR else NavType.LINEAR
+            return self._first_feasible(sc, rng, [(kind, nav), (kind, other)])
         if strategy == "maneuver":
             return self.add_actor(sc, rng, ActorKind.VEHICLE, NavType.MANEUVER)
         if strategy == "all":
-            nav = rng.choice([NavType.AUTOPILOT, NavType.LINEAR, NavType.IMMOBILE, NavType.MANEUVER])
+            navs = [NavType.AUTOPILOT, NavType.LINEAR, NavType.IMMOBILE, NavType.MANEUVER]
+            nav = rng.choice(navs)
             kind = ActorKind.VEHICLE if nav is NavType.MANEUVER else self._kind(sc, rng)
-            return self.add_actor(sc, rng, kind, nav)
+            rest = [n for n in navs if n is not nav]
+            rng.shuffle(rest)
+            return self._first_feasible(sc, rng, [(kind, nav)] + [
+                (ActorKind.VEHICLE if n is NavType.MANEUVER else kind, n) for n in rest])
         raise ValueError(f"unknown strategy {strategy!r}")
+
+    def _first_feasible(self, sc: Scenario, rng: random.Random, options: list[tuple[ActorKind, NavType]]) -> Mutation:
+        """The first of ``options`` (kind, navigation) that can be placed fairly; else the last one's reason.
+        On a network of one-lane roads without sidewalks, say, no standing walker is fair on the ego's route."""
+        retries = 0
+        for kind, nav in options:
+            m = self.add_actor(sc, rng, kind, nav)
+            retries += m.retries
+            if m.scenario is not sc:
+                return Mutation(m.scenario, m.description, retries)
+        return Mutation(sc, m.description, retries)
 
     def add_actor(self, sc: Scenario, rng: random.Random, kind: ActorKind, nav: NavType) -> Mutation:
         cfg = self.cfg
