@@ -81,3 +81,31 @@ def test_an_attempt_that_lost_ownership_of_its_job_stops(tmp_path, town_scenario
     summary = job.run(stop=newer_attempt_takes_over)
     assert summary["status"] == "superseded" and not (out / "jobs" / "000" / "summary.json").exists()
     assert len(_ended(out)) == 2  # it finished the execution it had started, and no other
+
+
+def test_a_finding_replays_wherever_it_is_copied(tmp_path, town_scenario, monkeypatch):
+    """The finding carries its network (checked by content hash): copied to another folder, with the network
+    it was made on gone, it still replays; a changed network copy is refused with one line."""
+    import shutil
+
+    net = tmp_path / "maps" / "mytown.net.xml"
+    net.parent.mkdir()
+    shutil.copyfile(town_scenario.network, net)
+    seed = town_scenario.model_copy(update={"network": str(net), "sim": SimOptions(time_limit=40.0)})
+    cfg = FuzzConfig(cycles=2, population=2, max_execs=4, ads=AdsSpec(name="ego", options={"fault": "speeding"}))
+    (found, *_rest) = Campaign(tmp_path / "out", [seed], cfg).run()
+    manifest = json.loads((found.path / "scenario.json").read_text())
+    assert manifest["network"] == "mytown.net.xml" and len(manifest["network_sha256"]) == 64
+    elsewhere = tmp_path / "elsewhere" / "bug"
+    shutil.copytree(found.path, elsewhere)
+    shutil.rmtree(tmp_path / "maps")
+    shutil.rmtree(tmp_path / "out")
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    result = CliRunner().invoke(main, ["replay", "bug"])
+    assert result.exit_code == 0, result.output
+    assert "reproduced: speeding" in result.output
+    copy = elsewhere / "mytown.net.xml"
+    copy.write_text(copy.read_text().replace('speed="13.89"', 'speed="13.80"', 1))
+    result = CliRunner().invoke(main, ["replay", "bug"])
+    assert result.exit_code == 2
+    assert "scenario.json" in result.output and "not the network this scenario was made on" in result.output

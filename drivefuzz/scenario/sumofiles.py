@@ -17,9 +17,11 @@ Additional files carry no schema header and must be loaded with ``-X never``:
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
+import shutil
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any
@@ -199,11 +201,13 @@ def sumocfg_xml(net_rel: str, step_length: float, time_limit: float) -> str:
 
 
 def write_scenario(scenario: Scenario, folder: str | os.PathLike, *, base: str | os.PathLike | None = None,
-                   durable: bool = True) -> Path:
+                   durable: bool = True, portable: bool = False) -> Path:
     """Validate ``scenario`` against its network and write its folder. Returns the manifest path.
 
     ``base`` resolves a relative ``scenario.network`` (default: the current directory).
     The manifest refers to the network by a path relative to ``folder`` when it can.
+    ``portable=True`` puts the network into the folder (a hard link where the filesystem allows, else a
+    copy) and records its SHA-256, so that the folder replays wherever it is copied (findings).
     ``durable=False`` skips the atomic, fsync'd writes, for a scratch folder that
     is deleted after the run (the executor's; about 4 ms per execution).
     """
@@ -215,10 +219,14 @@ def write_scenario(scenario: Scenario, folder: str | os.PathLike, *, base: str |
     net_path = scenario.network_path(base).resolve()
     rmap = load_roadmap(net_path)
     route = validate(scenario, rmap, source=str(folder / MANIFEST))
-    try:
-        net_ref = os.path.relpath(net_path, folder.resolve())
-    except ValueError:  # other drive on Windows
-        net_ref = str(net_path)
+    net_hash = None
+    if portable:
+        net_ref, net_hash = _bring_network(net_path, folder), network_sha256(net_path)
+    else:
+        try:
+            net_ref = os.path.relpath(net_path, folder.resolve())
+        except ValueError:  # other drive on Windows
+            net_ref = str(net_path)
     start = rmap.geom(scenario.mission.start_lane).position(scenario.mission.start_pos)
     write = atomic_write_text if durable else _plain_write
     write(folder / ROUTES, routes_xml(scenario, route))
@@ -236,7 +244,29 @@ def write_scenario(scenario: Scenario, folder: str | os.PathLike, *, base: str |
         "seed": scenario.seed,
         "sim": scenario.sim.model_dump(mode="json"),
     }
+    if net_hash is not None:
+        manifest["network_sha256"] = net_hash
     return write(folder / MANIFEST, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
+
+
+def network_sha256(path: str | os.PathLike) -> str:
+    """SHA-256 of a network file's bytes (hex)."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def _bring_network(net_path: Path, folder: Path) -> str:
+    """Put the network file into ``folder`` under its own name; return that name."""
+    target = folder / net_path.name
+    if not target.exists():
+        try:
+            os.link(net_path, target)
+        except OSError:  # another filesystem, or links not allowed
+            shutil.copyfile(net_path, target)
+    return net_path.name
 
 
 def _plain_write(path: Path, text: str) -> Path:
@@ -287,6 +317,7 @@ def read_scenario(path: str | os.PathLike, *, validate_network: bool = True) -> 
     puddles, weather, signals = _read_additional(add_path)
     net = Path(manifest["network"])
     net = net if net.is_absolute() else (folder / net).resolve()
+    _check_network_hash(manifest, net, src)
     try:
         scenario = Scenario(
             network=str(net), mission=mission, actors=tuple(actors), puddles=tuple(puddles), weather=weather,
@@ -308,6 +339,21 @@ def read_scenario(path: str | os.PathLike, *, validate_network: bool = True) -> 
             raise InvalidScenario(src, "network", exc.problem, "path of a SUMO .net.xml relative to the folder") from None
         validate(scenario, rmap, source=src)
     return scenario
+
+
+def _check_network_hash(manifest: dict, net: Path, src: str) -> None:
+    """A portable folder's network must be the one it was made on (``network_sha256``)."""
+    want = manifest.get("network_sha256")
+    if want is None:
+        return
+    if not isinstance(want, str):
+        raise InvalidScenario(src, "network_sha256", "not a string", "the hex SHA-256 of the network file")
+    if not net.is_file():
+        raise InvalidScenario(src, "network", f"no such network file {manifest['network']!r}",
+                              "the network file next to scenario.json (copy the whole folder)")
+    if network_sha256(net) != want:
+        raise InvalidScenario(src, "network", f"{net.name} is not the network this scenario was made on "
+                              f"(its SHA-256 differs from {want[:12]}...)", "the folder's own copy of the network")
 
 
 def _read_routes(path: Path) -> tuple[Mission, list[Actor]]:

@@ -141,7 +141,7 @@ class FindingStore:
         sub = INCIDENTS if fault == "other" else FINDINGS
         rel = f"{sub}/{sig_key}-{m.oracle}"
         with atomic_dir(self.out / rel) as tmp:
-            write_scenario(scenario, tmp)
+            write_scenario(scenario, tmp, portable=True)  # with its network: it replays wherever it is copied
             if trace is not None:
                 trace.save(tmp / "trace")
             atomic_write_json(tmp / "verdict.json", {
