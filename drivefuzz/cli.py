@@ -281,7 +281,10 @@ def seed(network, count, out, rng_seed, no_verify, force):
 @click.option("--no-feedback", is_flag=True, help="Same as --feedback random (the paper's baseline).")
 @click.option("--single-pass", is_flag=True, help="One lineage per seed, then stop (the default without a budget).")
 @click.option("--report-all", is_flag=True, help="Count incidents (not the ego's fault) as findings too.")
+@click.option("--report", "write_html", is_flag=True, help="Write OUT/report.html and report.md at the end.")
 @click.option("--continue-after-finding", is_flag=True, help="Keep fuzzing a seed after a finding.")
+@click.option("--shrink", type=click.IntRange(0, 1000), default=None,
+              help="Executions spent shrinking each new finding to a minimal reproducer, 0: none [10].")
 @click.option("--time-limit", type=_Seconds(), default=None, help="Simulated seconds per execution (default: the seed's).")
 @click.option("--jobs", "-j", type=click.IntRange(1, JOBS_PER_CPU * (os.cpu_count() or 1)), default=None, help="Seed campaigns at once on a local Dask cluster [1].")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
@@ -291,7 +294,7 @@ def seed(network, count, out, rng_seed, no_verify, force):
 @oracle_options
 @handle_errors
 def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_execs, rng_seed, seeds_dir, ads_name,
-         ads_option, feedback, no_feedback, single_pass, report_all, continue_after_finding, time_limit, jobs, scheduler, exec_timeout, no_isolation,
+         ads_option, feedback, no_feedback, single_pass, report_all, write_html, continue_after_finding, shrink, time_limit, jobs, scheduler, exec_timeout, no_isolation,
          oracle_kv, no_oracle, config_file):
     """Fuzz the ADS on NETWORK (a .net.xml). Exit 0: nothing found; 1: misbehaviour found; 2: bad input."""
     from drivefuzz.ads import check_trusted
@@ -321,8 +324,8 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
         cfg = _fuzz_config(config, config_file, dict(
             cycles=cycles, population=population, strategy=strategy, seed=rng_seed, budget=budget,
             max_execs=max_execs, feedback=feedback, no_feedback=no_feedback, single_pass=single_pass,
-            continue_after_finding=continue_after_finding, time_limit=time_limit, no_isolation=no_isolation,
-            exec_timeout=exec_timeout), ads_name, ads_option, oracle_kv, no_oracle)
+            continue_after_finding=continue_after_finding, shrink=shrink, time_limit=time_limit,
+            no_isolation=no_isolation, exec_timeout=exec_timeout), ads_name, ads_option, oracle_kv, no_oracle)
         from drivefuzz.ads import load_ads
 
         load_ads(cfg.ads.name, cfg.ads.options)  # fail now on an unknown ADS or option
@@ -352,6 +355,10 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
         sys.exit(EXIT_ABORTED)
     status.close()
     _print_summary(campaign, findings, out_dir, report_all)
+    if write_html:
+        from drivefuzz.triage.report import write_report
+
+        click.echo("report: {} and {}".format(*write_report(out_dir)))
     sys.exit(_exit_code(findings + (campaign.incidents if report_all else []), bool(campaign.failed_jobs)))
 
 
@@ -384,7 +391,7 @@ def _fuzz_config(config: dict[str, Any], config_file: str | None, cli: dict[str,
         max_execs=pick("max_execs"),
         feedback="random" if pick("no_feedback", False) else pick("feedback", "risk"),
         single_pass=pick("single_pass", False),
-        continue_after_finding=pick("continue_after_finding", False), ads=ads,
+        continue_after_finding=pick("continue_after_finding", False), shrink=pick("shrink", 10), ads=ads,
         oracles=_oracle_settings(config, oracle_kv, no_oracle, source=config_file),
         mutation=MutationConfig.model_validate(config.get("mutation", {})),
         quality=QualityConfig.model_validate(config.get("quality", {})),
@@ -644,24 +651,10 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
 @handle_errors
 def replay(finding, gui, ads_name):
     """Run a FINDING directory again; 'reproduced' only if the same oracle fires at the same frame."""
-    from drivefuzz.ads import check_trusted
     from drivefuzz.sim.execute import execute
-    from drivefuzz.oracle import OracleSettings
     from drivefuzz.sim.simhost import FAILURE_KINDS
-    from drivefuzz.scenario.sumofiles import read_scenario
 
-    folder = Path(finding)
-    vpath = folder / "verdict.json"
-    if not vpath.is_file():
-        raise InvalidConfig(finding, None, "not a finding directory (no verdict.json)", "findings/<n>-<oracle>-<hash>/")
-    verdict, want = _read_verdict(vpath)
-    sc = read_scenario(folder)
-    _check_runnable(sc, str(folder / "scenario.json"))
-    if ads_name is not None and ads_name != sc.ads.name:
-        raise InvalidConfig("--ads", ads_name, f"the finding was made with {sc.ads.name!r}",
-                            f"--ads {sc.ads.name} (to trust it)")
-    check_trusted(sc.ads.name, str(folder / "scenario.json"), "ads.name", command_line=ads_name)
-    oracles = OracleSettings(settings=verdict["oracles"]).instantiate(source=str(vpath))
+    folder, verdict, want, sc, oracles = _load_finding(finding, ads_name)
     if want.oracle in FAILURE_KINDS:  # a crash, hang or plugin error: run it isolated again
         from drivefuzz.sim.simhost import SimHost
 
@@ -681,6 +674,47 @@ def replay(finding, gui, ads_name):
     seen = f"{got.oracle}/{got.kind} at frame {got.frame}" if got else f"no misbehaviour ({ex.termination.value})"
     click.echo(f"NOT reproduced: expected {want.oracle}/{want.kind} at frame {want.frame}, got {seen}")
     sys.exit(EXIT_FOUND)
+
+
+def _load_finding(finding: str, ads_name: str | None):
+    """A finding folder, checked: (folder, verdict, its first Misbehavior, scenario, oracle instances)."""
+    from drivefuzz.ads import check_trusted
+    from drivefuzz.oracle import OracleSettings
+    from drivefuzz.scenario.sumofiles import read_scenario
+
+    folder = Path(finding)
+    vpath = folder / "verdict.json"
+    if not vpath.is_file():
+        raise InvalidConfig(finding, None, "not a finding directory (no verdict.json)", "findings/<n>-<oracle>-<hash>/")
+    verdict, want = _read_verdict(vpath)
+    sc = read_scenario(folder)
+    _check_runnable(sc, str(folder / "scenario.json"))
+    if ads_name is not None and ads_name != sc.ads.name:
+        raise InvalidConfig("--ads", ads_name, f"the finding was made with {sc.ads.name!r}",
+                            f"--ads {sc.ads.name} (to trust it)")
+    check_trusted(sc.ads.name, str(folder / "scenario.json"), "ads.name", command_line=ads_name)
+    return folder, verdict, want, sc, OracleSettings(settings=verdict["oracles"]).instantiate(source=str(vpath))
+
+
+# -------------------------------------------------------------------------- shrink
+@main.command("shrink")
+@click.argument("finding", type=click.Path())
+@click.option("--budget", default=30, show_default=True, type=click.IntRange(1, 10_000),
+              help="Executions the shrinking may spend.")
+@click.option("--ads", "ads_name", default=None, callback=_ads_from_the_command_line, metavar="NAME",
+              help="The finding's ADS when it is not an installed plugin (package.module:Class): import it anyway.")
+@handle_errors
+def shrink_cmd(finding, budget, ads_name):
+    """Shrink a FINDING to a minimal reproducer (FINDING/minimal/, replayable) with the same signature."""
+    from drivefuzz.triage.shrink import shrink_finding
+
+    folder, verdict, want, sc, oracles = _load_finding(finding, ads_name)
+    if verdict.get("frames") is None:
+        raise InvalidConfig(str(folder / "verdict.json"), "frames", "a crash or hang has no trace to shrink against",
+                            "a finding of an oracle")
+    shrunk = shrink_finding(folder, verdict, want, sc, oracles, budget)
+    click.echo(f"{shrunk.summary}")
+    click.echo(f"minimal reproducer: {folder / 'minimal'}  (drivefuzz replay {folder / 'minimal'})")
 
 
 def _read_verdict(path: Path):

@@ -76,6 +76,10 @@ def test_report_is_one_self_contained_file_with_a_card_per_signature(campaign, t
     for folder in folders:
         assert f"`{folder}`" in md
     assert "speeding" in md and "data:" not in md
+    # every finding was shrunk during the campaign: its card and section show the minimal reproducer
+    for folder in (f for f in folders if f.startswith("findings/")):
+        assert f"drivefuzz replay {out / folder / 'minimal'}" in md
+    assert html.count("minimal reproducer (") == sum(f.startswith("findings/") for f in folders)
 
 
 def test_findings_rows_match_the_folders_and_are_numbered_by_first_hit(campaign):
@@ -140,3 +144,13 @@ def test_not_a_campaign_is_an_input_error(tmp_path):
     for cmd in ("report", "findings"):
         result = CliRunner().invoke(main, [cmd, str(tmp_path)])
         assert result.exit_code == 2 and "not a campaign directory" in result.output
+
+
+def test_fuzz_writes_the_report_at_the_end_when_asked(tmp_path):
+    out = tmp_path / "camp"
+    result = CliRunner().invoke(main, ["fuzz", str(ROOT / "networks" / "town.net.xml"), "--seeds",
+                                       str(ROOT / "seeds" / "town"), "--max-execs", "3", "--cycles", "1",
+                                       "--population", "2", "--report", "-o", str(out)])
+    assert result.exit_code in (0, 1), result.output
+    assert f"report: {out / 'report.html'} and {out / 'report.md'}" in result.output
+    assert "<html" in (out / "report.html").read_text() and (out / "report.md").read_text().startswith("# drivefuzz report")

@@ -43,6 +43,7 @@ class FuzzSection(_Section):
     single_pass: bool = False
     patience: int | None = Field(default=None, ge=1)
     continue_after_finding: bool = False
+    shrink: int | None = Field(default=None, ge=0, le=1000, description="executions to shrink a new finding")
     time_limit: float | None = Field(default=None, gt=0.0, le=MAX_EXEC_TIMEOUT_S, description="[s] simulated")
     no_isolation: bool = False
     exec_timeout: float | None = Field(default=None, gt=0.0, le=MAX_EXEC_TIMEOUT_S, description="[s] wall clock")
@@ -138,6 +139,7 @@ class ManifestConfig(BaseModel):
     max_execs: int | None = Field(default=None, ge=1)
     feedback: bool | Literal["risk", "paper", "random"] = "risk"
     continue_after_finding: bool = False
+    shrink: int = Field(default=0, ge=0)
     ads: AdsSection = Field(default_factory=AdsSection)
     oracles: dict[str, dict[str, Any]] = Field(default_factory=dict)
     mutation: dict[str, Any] = Field(default_factory=dict)

@@ -557,7 +557,14 @@ def _card_html(c: Card) -> str:
             f'<p class="meta">fault <span class="pill {_e(r.fault)}">{_e(r.fault)}</span> {_e(r.reason)}</p>'
             f'<p class="meta">{r.hits} hit(s) &middot; reproduced {_e(r.reproduction)} &middot; first seen {_e(_first_seen(r))}'
             f" &middot; folder <code>{_e(r.folder)}</code></p>"
-            f'<div class="pics">{pics}</div>{notes}<pre>{_e(r.replay)}</pre></div>')
+            f'<div class="pics">{pics}</div>{notes}<pre>{_e(r.replay)}</pre>{_minimal_html(r)}</div>')
+
+
+def _minimal_html(r) -> str:
+    if r.minimal is None:
+        return ""
+    return (f'<p class="meta">minimal reproducer ({_e(r.minimal.split(": ", 1)[0])}):</p>'
+            f"<pre>{_e(r.minimal_replay)}</pre>")
 
 
 def render_html(info: CampaignInfo, findings: list[FindingRow], incidents: list[FindingRow], cards: list[Card],
@@ -610,4 +617,7 @@ def render_markdown(info: CampaignInfo, findings: list[FindingRow], incidents: l
                       f"- fault: {r.fault} ({r.reason})",
                       f"- {r.hits} hit(s); reproduced {r.reproduction}; first seen {_first_seen(r)}",
                       f"- folder: `{r.folder}`", "", "```sh", r.replay, "```", ""]
+            if r.minimal is not None:
+                lines += [f"- minimal reproducer ({r.minimal.split(': ', 1)[0]}):", "", "```sh", r.minimal_replay,
+                          "```", ""]
     return "\n".join(lines)

@@ -9,6 +9,9 @@ A seed job hands every execution whose oracles fired to :meth:`FindingStore.tria
    the ego (the verdict, and so the signature, may change to ``other`` or ``unclear``), then the **reproduction rate** under small
    perturbations (:mod:`drivefuzz.triage.reproduce`), then the folder is written.
 
+4. For a new **finding** (not an incident), with ``TriageConfig.shrink`` executions: a minimal reproducer
+   by delta debugging (:mod:`drivefuzz.triage.shrink`), in the folder's ``minimal/``.
+
 Folders: ``findings/<signature>-<oracle>/`` when the ego is at fault (or it is unclear), ``incidents/...``
 when it is not. Each holds the SUMO files, ``scenario.json``, the trace, ``verdict.json`` (misbehaviours,
 attribution, signature, reproduction, the execution that found it) and ``replay.sh``. How many executions
@@ -66,6 +69,7 @@ class Triaged:
 class TriageConfig:
     counterfactual: bool = True  # replay with the careful driver when the rules blame the ego
     reproduce: int = 5  # perturbed reruns of each new signature's representative (0: none)
+    shrink: int = 0  # executions to shrink each new finding (not incidents) to a minimal reproducer (0: none)
 
 
 def _crash_key(m: Misbehavior) -> str:
@@ -138,13 +142,18 @@ class FindingStore:
                 return None if got is None else got[0]
 
             reproduction = reproduction_rate(scenario, m, rerun, k=self.cfg.reproduce).as_dict()
+        shrunk = None
+        if trace is not None and fault != "other" and self.cfg.shrink > 0:
+            from drivefuzz.triage.shrink import rules_signature, shrink
+
+            shrunk = shrink(scenario, m, rules_key, self.run, rules_signature(self.rmap), self.cfg.shrink)
         sub = INCIDENTS if fault == "other" else FINDINGS
         rel = f"{sub}/{sig_key}-{m.oracle}"
         with atomic_dir(self.out / rel) as tmp:
             write_scenario(scenario, tmp, portable=True)  # with its network: it replays wherever it is copied
             if trace is not None:
                 trace.save(tmp / "trace")
-            atomic_write_json(tmp / "verdict.json", {
+            verdict = {
                 "misbehaviors": [x.as_dict() for x in misbehaviors], "termination": termination,
                 "scenario_hash": scenario.content_hash(), "key": key,
                 "seed_index": int(key.split("/")[0]) if key.split("/")[0].isdigit() else 0,
@@ -152,7 +161,13 @@ class FindingStore:
                 "attribution": None if att is None else att.as_dict(), "signature": {"key": sig_key, **sig},
                 "reproduction": reproduction, "triage_executions": spent, "ads": scenario.ads.model_dump(mode="json"),
                 "drivefuzz": drivefuzz.__version__, **self.extra, **(extra or {}),
-            })
+            }
+            if shrunk is not None:
+                from drivefuzz.triage.shrink import MINIMAL, write_minimal
+
+                verdict["shrink"] = shrunk.as_dict()
+                write_minimal(tmp / MINIMAL, verdict, shrunk, trace)
+            atomic_write_json(tmp / "verdict.json", verdict)
             atomic_write_text(tmp / "replay.sh", replay_script(scenario.ads.name))
             os.chmod(tmp / "replay.sh", 0o755)
         if rules_key != sig_key:

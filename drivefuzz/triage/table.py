@@ -49,6 +49,11 @@ class FindingRow:
     sim_time_s: float | None  # [s] simulated time of the event in its execution
     replay: str  # the command that replays it
     incident: bool = False
+    minimal: str | None = None  # the shrunk reproducer: what it kept, and the command that replays it
+
+    @property
+    def minimal_replay(self) -> str | None:
+        return None if self.minimal is None else self.minimal.split(": ", 1)[1]
 
     @property
     def reproduction(self) -> str:
@@ -244,8 +249,20 @@ def _row(n: int, rel: str, path: Path, v: dict[str, Any], first, indexed_hits, i
         first_time_s=round(first[2], 2) if first else None,
         sim_time_s=_num(m.get("time")) if isinstance(frame, int) and frame >= 0 else None,
         replay=replay_command(path, ads.get("name") if isinstance(ads.get("name"), str) else None),
-        incident=incident,
+        incident=incident, minimal=_minimal(path, v, ads.get("name") if isinstance(ads.get("name"), str) else None,
+                                            replay_command),
     )
+
+
+def _minimal(path: Path, v: dict[str, Any], ads_name: str | None, replay_command) -> str | None:
+    """'<sizes before -> after>: <replay command>' of the finding's minimal reproducer, if it has one."""
+    shrink = v.get("shrink")
+    if not isinstance(shrink, dict) or not (path / "minimal" / "verdict.json").exists():
+        return None
+    b = shrink.get("before") if isinstance(shrink.get("before"), dict) else {}
+    a = shrink.get("after") if isinstance(shrink.get("after"), dict) else {}
+    sizes = ", ".join(f"{k} {b.get(k)} -> {a.get(k)}" for k in ("actors", "puddles", "knobs", "sim_seconds"))
+    return f"{sizes}: {replay_command(path / 'minimal', ads_name)}"
 
 
 def format_table(rows: list[FindingRow], title: str) -> str:
