@@ -717,6 +717,52 @@ def shrink_cmd(finding, budget, ads_name):
     click.echo(f"minimal reproducer: {folder / 'minimal'}  (drivefuzz replay {folder / 'minimal'})")
 
 
+# -------------------------------------------------------------------------- regress
+@main.command("regress")
+@click.argument("archives", nargs=-1, required=True, type=click.Path())
+@click.option("--ads", "ads_name", required=True, callback=_ads_from_the_command_line, metavar="NAME",
+              help="The ADS to re-run the findings with (a plugin name or package.module:Class).")
+@click.option("--ads-option", multiple=True, metavar="K=V", help="Option of that ADS.")
+@click.option("--junit", "junit_out", type=click.Path(dir_okay=False), help="Write a JUnit XML file here.")
+@click.option("--exec-timeout", type=_Seconds(), default=300.0, show_default=True,
+              help="Wall seconds before a rerun counts as a hang.")
+@handle_errors
+def regress_cmd(archives, ads_name, ads_option, junit_out, exec_timeout):
+    """Re-run every finding of ARCHIVE... (campaign directories or finding folders) with another ADS.
+
+    Each finding is 'still failing', 'failing differently' or 'fixed'. Exit 1 when any still fails or
+    fails differently, 0 when all are fixed, 2 on bad input."""
+    from drivefuzz.ads import load_ads
+    from drivefuzz.scenario import AdsSpec
+    from drivefuzz.scenario.sumofiles import read_scenario
+    from drivefuzz.sim.simhost import SimHost
+    from drivefuzz.triage.regress import finding_folders, format_outcomes, junit_xml, regress_one
+
+    folders = finding_folders(archives)
+    try:
+        ads = AdsSpec(name=ads_name, options=parse_kv(ads_option, "--ads-option"))
+    except ValueError as exc:
+        raise InvalidConfig("--ads-option", None, str(exc).splitlines()[-1].strip()) from None
+    load_ads(ads.name, ads.options)  # fail now on an unknown ADS or option
+    if junit_out:
+        _writable_dir(Path(junit_out).parent, "--junit")
+    outcomes = []
+    with SimHost(timeout_s=exec_timeout) as host:
+        for folder in folders:
+            verdict, want = _read_verdict(folder / "verdict.json")
+            sc = read_scenario(folder).model_copy(update={"ads": ads})
+            _check_runnable(sc, str(folder / "scenario.json"))
+            outcomes.append(o := regress_one(host, folder, verdict, want, sc))
+            click.echo(f"{o.status}: {folder} ({o.detail})", err=True)
+    click.echo(format_outcomes(outcomes))
+    if junit_out:
+        from drivefuzz.storage import atomic_write_text
+
+        atomic_write_text(junit_out, junit_xml(outcomes, ads.name))
+        click.echo(f"JUnit: {junit_out}")
+    sys.exit(EXIT_FOUND if any(o.failed for o in outcomes) else EXIT_CLEAN)
+
+
 def _read_verdict(path: Path):
     """A finding's verdict.json, checked: (the verdict, its first Misbehavior)."""
     import math
