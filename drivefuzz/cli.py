@@ -645,11 +645,13 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
 # -------------------------------------------------------------------------- replay
 @main.command()
 @click.argument("finding", type=click.Path())
-@click.option("--gui", is_flag=True, help="Show the run in sumo-gui.")
+@click.option("--gui", is_flag=True, help="Show the run in sumo-gui, following the ego; it stays open at the failure.")
+@click.option("--speed", type=click.FloatRange(min=0.01, max=100.0), default=1.0, show_default=True,
+              help="With --gui: simulated seconds per wall-clock second (1 = real time).")
 @click.option("--ads", "ads_name", default=None, callback=_ads_from_the_command_line, metavar="NAME",
               help="The finding's ADS when it is not an installed plugin (package.module:Class): import it anyway.")
 @handle_errors
-def replay(finding, gui, ads_name):
+def replay(finding, gui, speed, ads_name):
     """Run a FINDING directory again; 'reproduced' only if the same oracle fires at the same frame."""
     from drivefuzz.sim.execute import execute
     from drivefuzz.sim.simhost import FAILURE_KINDS
@@ -666,7 +668,12 @@ def replay(finding, gui, ads_name):
         got = f"{out.status} ({out.detail})" if out.status != "ok" else "a normal execution"
         click.echo(f"NOT reproduced: expected {want.oracle}/{want.kind}, got {got}")
         sys.exit(EXIT_FOUND)
-    ex = execute(sc, oracles=oracles, gui=gui)
+    view = None
+    if gui:
+        from drivefuzz.sim.gui import GuiView
+
+        view = GuiView(speed=speed, say=lambda text: click.echo(text, err=True))
+    ex = execute(sc, oracles=oracles, gui=view or False)
     got = ex.misbehaviors[0] if ex.misbehaviors else None
     if got is not None and got.oracle == want.oracle and got.kind == want.kind and got.frame == want.frame:
         click.echo(f"reproduced: {got.oracle}/{got.kind} at frame {got.frame} (t={got.time:.2f} s)")

@@ -170,8 +170,8 @@ def additional_xml(scenario: Scenario, puddle_lanes: list[list[str]], weather_xy
         root.append(tl)
     for i, p in enumerate(scenario.puddles):
         shape = " ".join(f"{x:.3f},{y:.3f}" for x, y in p.corners())
-        poly = ET.SubElement(root, "poly", id=f"puddle_{i}", type="drivefuzz.puddle", color="0,90,200",
-                             fill="1", layer="1", shape=shape)
+        poly = ET.SubElement(root, "poly", id=f"puddle_{i}", type="drivefuzz.puddle", color="0,90,200,160",
+                             fill="1", layer=PUDDLE_LAYER, shape=shape)
         for key in ("x", "y", "length", "width", "rotation", "friction"):
             _param(poly, f"drivefuzz.{key}", _f(getattr(p, key)))
     for i, p in enumerate(scenario.puddles):
@@ -187,9 +187,21 @@ def additional_xml(scenario: Scenario, puddle_lanes: list[list[str]], weather_xy
     return ET.tostring(root, encoding="unicode") + "\n"
 
 
+#: sumo-gui draws shapes by layer; the network is drawn at 0 and its lanes must not hide the puddles
+PUDDLE_LAYER = "10"
+
+#: the first lines of every scenario.sumocfg: what sumo-gui shows of it, and what it does not
+SUMOCFG_NOTE = (
+    "<!-- drivefuzz scenario. In a run, drivefuzz drives the ego (its ADS and vehicle physics) and moves the\n"
+    "     scripted actors (linear, maneuver, immobile); sumo-gui -c on this file lets SUMO's own models drive\n"
+    "     them instead, so what it shows is not the finding. To watch the finding, give drivefuzz replay this\n"
+    "     folder and its gui flag (an XML comment cannot hold two dashes; see drivefuzz replay -h). -->\n"
+)
+
+
 def sumocfg_xml(net_rel: str, step_length: float, time_limit: float) -> str:
     return (
-        "<configuration>\n"
+        SUMOCFG_NOTE + "<configuration>\n"
         f'    <input><net-file value="{net_rel}"/><route-files value="{ROUTES}"/>'
         f'<additional-files value="{ADDITIONAL}"/></input>\n'
         f'    <time><begin value="0"/><end value="{time_limit!r}"/><step-length value="{step_length!r}"/></time>\n'

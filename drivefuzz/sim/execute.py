@@ -59,6 +59,7 @@ from drivefuzz.ads import ADS, EgoState, MissionInfo, Observation, TrafficLightS
 from drivefuzz.errors import PluginError, SimulationError
 from drivefuzz.oracle import Frame, LaneLink, Misbehavior, Oracle, RunContext, Termination
 from drivefuzz.sim.physics import VehicleParams, VehiclePhysics, place_state
+from drivefuzz.sim.gui import GuiView
 from drivefuzz.scenario.roadmap import load_roadmap
 from drivefuzz.scenario import Scenario
 from drivefuzz.scenario.sumofiles import ADDITIONAL, EGO_ID, ROUTES, write_scenario
@@ -115,8 +116,8 @@ def _sumo_args(scenario: Scenario, folder: Path, net: Path, gui: bool) -> list[s
         "--no-step-log", "true", "--no-warnings", "true", "--duration-log.disable", "true",
         "--end", repr(scenario.sim.time_limit + 10.0),
     ]
-    if gui:
-        args += ["--start", "--quit-on-end", "--delay", "50"]
+    if gui:  # drivefuzz paces the steps and closes the window (sim/gui.py)
+        args += ["--start", "--quit-on-end", "--delay", "0"]
     return args
 
 
@@ -125,7 +126,7 @@ def execute(
     *,
     ads: ADS | None = None,
     oracles: Sequence[Oracle] = (),
-    gui: bool = False,
+    gui: "bool | GuiView" = False,
     stop_on_misbehavior: bool = True,
     workdir: str | os.PathLike | None = None,
     vehicle: VehicleParams | None = None,
@@ -133,8 +134,10 @@ def execute(
     """Run ``scenario`` once and return its :class:`Execution`.
 
     ``ads`` defaults to the scenario's ADS plugin. ``workdir`` keeps the SUMO
-    files (a temporary folder otherwise).
+    files (a temporary folder otherwise). ``gui``: show the run in sumo-gui (True, or a
+    :class:`~drivefuzz.sim.gui.GuiView` that says how).
     """
+    view = (GuiView() if gui is True else gui) or None
     wall0 = time.perf_counter()
     params = vehicle or VehicleParams()
     ads = ads if ads is not None else load_ads(scenario.ads.name, scenario.ads.options)
@@ -157,7 +160,11 @@ def execute(
         except Exception as exc:  # TraCIException cannot be pickled: re-raise plainly
             raise SimulationError(f"SUMO failed to start on {folder}: {type(exc).__name__}: {exc}") from None
         try:
-            result = _run(sim, scenario, rmap, ads, list(oracles), params, stop_on_misbehavior, wall0)
+            if view is not None:
+                view.start(sim)
+            result = _run(sim, scenario, rmap, ads, list(oracles), params, stop_on_misbehavior, wall0, view)
+            if view is not None:
+                view.end(sim, result.misbehaviors)
         finally:
             try:
                 sim.close()
@@ -184,8 +191,10 @@ def _blame(what: str, name: str, where: str):
 
 
 def _run(sim, scenario: Scenario, rmap, ads: ADS, oracles: list[Oracle], params: VehicleParams,
-         stop_on_misbehavior: bool, wall0: float) -> Execution:
-    return _Run(sim, scenario, rmap, ads, oracles, params, stop_on_misbehavior, wall0).run()
+         stop_on_misbehavior: bool, wall0: float, view: "GuiView | None" = None) -> Execution:
+    run = _Run(sim, scenario, rmap, ads, oracles, params, stop_on_misbehavior, wall0)
+    run.view = view
+    return run.run()
 
 
 class _Run:
@@ -218,6 +227,7 @@ class _Run:
         self.misbehaviors: list[Misbehavior] = []
         self.steer = self.throttle = self.brake = 0.0
         self.time_limit = scenario.sim.time_limit
+        self.view: GuiView | None = None  # sumo-gui's pacing and view (replay --gui)
 
     def run(self) -> Execution:
         """Set up, then tick in the module docstring's order until the run terminates."""
@@ -518,6 +528,8 @@ class _Run:
         self.driver.step(self.t, self.vids, self.pids)
         self.sim.simulationStep()
         self.timings["sumo"] += perf() - t9
+        if self.view is not None:
+            self.view.after_step(self.sim, self.t + self.dt)
 
     def finish(self, termination: Termination) -> Execution:
         """Freeze the trace, run the oracles' end-of-run checks, and return the Execution."""
