@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 
 import pytest
 from click.testing import CliRunner
@@ -42,6 +43,7 @@ def test_small_campaign_runs_every_cell_and_resumes(tmp_path):
     out = tmp_path / "out"
     result = CliRunner().invoke(main, ["campaign", str(spec_file), "-o", str(out)])
     assert result.exit_code == 1, result.output  # the faulty ADS is found speeding
+    assert isinstance(result.exception, SystemExit), result.exception  # exit 1 by sys.exit, not a crash
     rows = list(csv.DictReader((out / "results.csv").open()))
     assert [r["cell"] for r in rows] == ["town all ego fault=speeding seed 0", "town entropy ego fault=speeding seed 0"]
     assert [r["folder"] for r in rows] == ["cells/town-all-ego-f1bffd-s0", "cells/town-entropy-ego-f1bffd-s0"]
@@ -50,6 +52,9 @@ def test_small_campaign_runs_every_cell_and_resumes(tmp_path):
         assert (out / r["folder"] / "index.sqlite").exists()
     assert any("speeding:" in r["by_oracle"] for r in rows)
     assert "town all ego fault=speeding seed 0" in (out / "results.md").read_text()
+    page = (out / "results.html").read_text()  # the batch report: one self-contained page
+    assert "town all ego fault=speeding seed 0" in page and "data:image/png;base64," in page
+    assert not re.search(r"(src|href)=['\"](?!data:|#)", page)
     before = {p.name for r in rows for p in (out / r["folder"] / "findings").iterdir()}
     again = CliRunner().invoke(main, ["campaign", "--resume", str(out)])
     assert again.exit_code == 1, again.output
@@ -161,3 +166,24 @@ def test_a_cell_budget_counts_from_its_first_job_not_from_the_queue(tmp_path):
     assert again.exit_code in (0, 1), again.output
     rows = list(csv.DictReader((out / "results.csv").open()))
     assert int(rows[1]["execs"]) >= 1 and "WARNING" not in rows[1]["status"], rows
+
+
+def _row(network, strategy, fault, seed, distinct):
+    return {"network": network, "strategy": strategy, "ads": "ego", "ads_options": json.dumps({"fault": fault}),
+            "seed": seed, "execs": 100, "distinct": distinct}
+
+
+def test_cells_that_differ_only_in_the_seed_are_compared_with_mann_whitney_and_a12():
+    from drivefuzz.campaign.compare import comparison_markdown, comparisons, configurations
+
+    rows = ([_row("town.net.xml", "all", "speeding", s, d) for s, d in enumerate([5, 6, 7, 6, 8])]
+            + [_row("town.net.xml", "entropy", "speeding", s, d) for s, d in enumerate([1, 2, 1, 0, 2])]
+            + [_row("highway.net.xml", "all", "speeding", 0, 3)])
+    configs = configurations(rows)
+    assert [(c.label, c.distinct) for c in configs][:2] == [
+        ('town.net.xml all ego {"fault": "speeding"}', (5.0, 6.0, 7.0, 6.0, 8.0)),
+        ('town.net.xml entropy ego {"fault": "speeding"}', (1.0, 2.0, 1.0, 0.0, 2.0))]
+    ((a, b, p, e),) = comparisons(configs)  # the highway has one repetition: not compared
+    assert (a.strategy, b.strategy) == ("all", "entropy") and e == 1.0 and p < 0.05
+    md = "\n".join(comparison_markdown(configs))
+    assert "| 6.40 |" in md and f"| {p:.4f} | 1.00 |" in md

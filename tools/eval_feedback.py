@@ -49,6 +49,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
 
+from drivefuzz.campaign.compare import a12, mann_whitney_p  # noqa: E402
+
 #: Faults of the reference ADS that no committed seed shows: only a situation the fuzzer builds reveals them.
 HIDDEN_FAULTS = ("ignore_pedestrians", "late_braking", "no_fog_slowdown")
 
@@ -102,22 +104,6 @@ def run_one(network: str, feedback: str, rep: int, opts: dict) -> dict:
     return {"network": network, "feedback": feedback, "rep": rep, "execs": campaign.progress.execs,
             "found": len(real), "distinct": len(keys), "first": first, "wall": wall, "fault": opts.get("fault"),
             "failures": len(findings) - len(real)}
-
-
-def mann_whitney_p(x: list[float], y: list[float]) -> float:
-    """Two-sided p of the Mann-Whitney U test (normal approximation with tie correction)."""
-    try:
-        from scipy.stats import mannwhitneyu
-
-        return float(mannwhitneyu(x, y, alternative="two-sided").pvalue)
-    except ValueError:  # every value equal
-        return 1.0
-
-
-def a12(x: list[float], y: list[float]) -> float:
-    """Vargha-Delaney A12: the probability that a value of x beats one of y (ties count half)."""
-    wins = sum((a > b) + 0.5 * (a == b) for a in x for b in y)
-    return wins / (len(x) * len(y))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -251,4 +251,8 @@ def write_results(out: Path, rows: list[dict[str, Any]]) -> None:
     cols = ["cell", "folder", "execs", "findings", "distinct", "incidents", "by_oracle", "status"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(str(r[c]) for c in cols) + " |" for r in rows]
+    from drivefuzz.campaign.compare import comparison_markdown, configurations, write_batch_report
+
+    lines += comparison_markdown(configurations(rows))
     atomic_write_text(out / "results.md", "\n".join(lines) + "\n")
+    write_batch_report(out, rows)
