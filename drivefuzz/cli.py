@@ -724,6 +724,35 @@ def shrink_cmd(finding, budget, ads_name):
     click.echo(f"minimal reproducer: {folder / 'minimal'}  (drivefuzz replay {folder / 'minimal'})")
 
 
+# -------------------------------------------------------------------------- export
+@main.command("export")
+@click.argument("finding", type=click.Path())
+@click.option("--to", "fmt", type=click.Choice(["openscenario"]), default="openscenario", show_default=True,
+              help="The format: OpenSCENARIO 1.2 (.xosc) with its road as OpenDRIVE (.xodr).")
+@click.option("-o", "out", type=click.Path(file_okay=False), default=None,
+              help="Output folder (default: FINDING/openscenario/).")
+@handle_errors
+def export_cmd(finding, fmt, out):
+    """Export a FINDING (its road, its actors' traced trajectories, the weather) for other simulators."""
+    from drivefuzz.scenario.sumofiles import read_scenario
+    from drivefuzz.sim.trace import Trace
+    from drivefuzz.triage.export import export_openscenario, validate_openscenario
+
+    folder = Path(finding)
+    vpath = folder / "verdict.json"
+    if not vpath.is_file():
+        raise InvalidConfig(finding, None, "not a finding directory (no verdict.json)", "findings/<sig>-<oracle>/")
+    _verdict, want = _read_verdict(vpath)
+    if not (folder / "trace").is_dir():
+        raise InvalidConfig(str(folder), "trace", "the finding has no trace (a crash or hang)", "a finding of an oracle")
+    out_dir = Path(out) if out else folder / "openscenario"
+    _writable_dir(out_dir, "-o")
+    xosc_path, xodr_path = export_openscenario(read_scenario(folder), Trace.load(folder / "trace"), want.time,
+                                               out_dir, folder.name)
+    validate_openscenario(xosc_path)
+    click.echo(f"wrote {xosc_path} (OpenSCENARIO 1.2, valid against its schema) and {xodr_path}")
+
+
 # -------------------------------------------------------------------------- regress
 @main.command("regress")
 @click.argument("archives", nargs=-1, required=True, type=click.Path())
