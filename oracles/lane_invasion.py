@@ -185,29 +185,22 @@ class _NetIndex:
         """The drivable junction area grown by ``tol`` (prepared), or None."""
         return self._drivable_and_cells(tol)[0]
 
-    def drivable_cells(self, tol: float) -> frozenset[tuple[int, int]]:
+    def drivable_cells(self, tol: float) -> "_Cells":
         """The grid cells (closed squares of ``_CELL``) that touch :meth:`drivable_within`: a point in
-        any other cell is certainly outside it, without asking shapely."""
+        any other cell is certainly outside it, without asking shapely. Each cell is tested when a point
+        first falls in it (a city's bounding box holds a million cells; a run visits a few hundred)."""
         return self._drivable_and_cells(tol)[1]
 
     def _drivable_and_cells(self, tol: float):
         got = self._drivable_tol.get(tol)
         if got is None:
-            got = (None, frozenset())
+            g = None
             if self.drivable is not None:
                 import shapely
 
                 g = self.drivable.buffer(tol) if tol > 0 else self.drivable
                 shapely.prepare(g)
-                x0, y0, x1, y1 = g.bounds
-                cells = [(cx, cy) for cx in range(int(math.floor(x0 / _CELL)), int(math.floor(x1 / _CELL)) + 1)
-                         for cy in range(int(math.floor(y0 / _CELL)), int(math.floor(y1 / _CELL)) + 1)]
-                eps = 0.01  # [m] a cell touching the area only within rounding counts as touching
-                boxes = shapely.box([cx * _CELL - eps for cx, _ in cells], [cy * _CELL - eps for _, cy in cells],
-                                    [(cx + 1) * _CELL + eps for cx, _ in cells],
-                                    [(cy + 1) * _CELL + eps for _, cy in cells])
-                touch = shapely.intersects(g, boxes)
-                got = (g, frozenset(c for c, t in zip(cells, touch.tolist()) if t))
+            got = (g, _Cells(g))
             self._drivable_tol[tol] = got
         return got
 
@@ -225,6 +218,30 @@ class _NetIndex:
             if prev is None or d < prev[1]:
                 out[lane.id] = (lane, d, h)
         return out
+
+
+class _Cells:
+    """The grid cells that touch an area, found on demand (``cell in cells``) and remembered."""
+
+    def __init__(self, area):
+        self.area = area
+        self.known: dict[tuple[int, int], bool] = {}
+
+    def __contains__(self, cell) -> bool:
+        hit = self.known.get(cell)
+        if hit is None:
+            hit = self.known[cell] = self._touches(cell)
+        return hit
+
+    def _touches(self, cell) -> bool:
+        if self.area is None:
+            return False
+        import shapely
+
+        cx, cy = cell
+        eps = 0.01  # [m] a cell touching the area only within rounding counts as touching
+        return bool(shapely.intersects(self.area, shapely.box(cx * _CELL - eps, cy * _CELL - eps,
+                                                              (cx + 1) * _CELL + eps, (cy + 1) * _CELL + eps)))
 
 
 _INDEX: dict[tuple[str, float], _NetIndex] = {}

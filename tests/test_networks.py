@@ -54,7 +54,7 @@ _NETS: dict[str, sumolib.net.Net] = {}
 
 def read(name: str) -> sumolib.net.Net:
     if name not in _NETS:
-        _NETS[name] = sumolib.net.readNet(str(net_path(name)), withInternal=True,
+        _NETS[name] = sumolib.net.readNet(str(net_path(name)), withInternal=True, lxml=False,
                                           withPedestrianConnections=True)
     return _NETS[name]
 
@@ -68,7 +68,7 @@ def crossings(net: sumolib.net.Net) -> list:
 
 
 def edge_ids(path: Path) -> tuple[set[str], set[str]]:
-    net = sumolib.net.readNet(str(path), withInternal=True)
+    net = sumolib.net.readNet(str(path), withInternal=True, lxml=False)
     edges = {e.getID() for e in net.getEdges(withInternal=True)}
     lanes = {lane.getID() for e in net.getEdges(withInternal=True) for lane in e.getLanes()}
     return edges, lanes
@@ -246,3 +246,16 @@ def test_build_fails_loudly_on_a_netconvert_warning(tmp_path):
     assert proc.returncode != 0
     assert "roundabout" in proc.stderr and "Warning" in proc.stderr
     assert not (tmp_path / "out" / "roundabout.net.xml").exists()
+
+
+def test_a_city_with_rail_signals_and_uncontrolled_links_passes_the_network_check():
+    """SUMO's own Berlin (tools/game/DRT): connections name rail signals (junctions, no <tlLogic>) and carry
+    linkIndex -1 (not controlled); SUMO loads it, so drivefuzz's check must accept it."""
+    import sumo
+
+    from drivefuzz.scenario.validate import check_network
+
+    berlin = Path(sumo.SUMO_HOME) / "tools" / "game" / "DRT" / "osm.net.xml"
+    text = berlin.read_text()
+    assert 'linkIndex="-1"' in text and 'type="rail_signal"' in text
+    check_network(berlin)

@@ -107,7 +107,10 @@ class RoadMap:
         import sumolib
 
         try:
-            self.net = sumolib.net.readNet(str(self.path), withInternal=True, withPedestrianConnections=True)
+            # lxml=False: sumolib's lxml reader (taken whenever lxml is installed, as scenariogeneration
+            # brings it) leaves crossings without their crossed edges; the SAX reader is what we test
+            self.net = sumolib.net.readNet(str(self.path), withInternal=True, withPedestrianConnections=True,
+                                           lxml=False)
         except (xml.sax.SAXException, ValueError, KeyError, AttributeError, IndexError, TypeError) as exc:
             raise InvalidNetwork(str(path), None, f"not a readable SUMO network ({type(exc).__name__}: {exc})",
                                  "a .net.xml written by netconvert") from None

@@ -183,6 +183,7 @@ def _check_network_xml(path: Path) -> None:
     edges: dict[str, tuple[str | None, str | None]] = {}  # id -> (from, to) of normal edges
     current = ["", 0]  # the edge being read, and how many lanes it has had
     tls: dict[str, int] = {}  # tlLogic id -> signals in its shortest phase
+    rail: set[str] = set()  # rail signals and crossings
     links: list[tuple[str, int, str]] = []  # (tl, linkIndex, connection)
     root_seen = False
     try:
@@ -205,6 +206,8 @@ def _check_network_xml(path: Path) -> None:
             elif tag == "junction":
                 jid = el.get("id", "")
                 junctions.add(jid)
+                if el.get("type") in RAIL_SIGNALS:  # SUMO builds their signals itself: no <tlLogic>
+                    rail.add(jid)
                 for name in ("x", "y"):
                     if not _finite(el.get(name)):
                         raise bad(f"junction[{jid}].{name}", f"{el.get(name)!r} is not a finite number")
@@ -244,11 +247,17 @@ def _check_network_xml(path: Path) -> None:
             if node is not None and node not in junctions:
                 raise bad(f"edge[{eid}].{end}", f"unknown junction {node!r}", "the id of a <junction>")
     for tl, index, name in links:
+        if index == -1 or (tl in rail and tl not in tls):  # not controlled (OSM cities), or a rail signal
+            continue
         if tl not in tls:
             raise bad(f"{name}.tl", f"unknown traffic light {tl!r}", "the id of a <tlLogic>")
         if not 0 <= index < tls[tl]:
             raise bad(f"{name}.linkIndex", f"{index} is not a signal of traffic light {tl!r}",
                       f"0 to {tls[tl] - 1}")
+
+
+#: junction types whose signals SUMO builds without a <tlLogic> (connections still name them in ``tl``)
+RAIL_SIGNALS = ("rail_signal", "rail_crossing")
 
 
 def _check_lane_el(el: ET.Element, current: list, bad) -> None:
