@@ -183,9 +183,8 @@ class Scenario(_Model):
     @classmethod
     def _unique_ids(cls, actors: tuple[Actor, ...]) -> tuple[Actor, ...]:
         ids = [a.id for a in actors]
-        dup = {i for i in ids if ids.count(i) > 1}
-        if dup:
-            raise ValueError(f"duplicate actor ids {sorted(dup)}")
+        if dup := _repeated(ids):
+            raise ValueError(f"duplicate actor ids {dup}")
         if "ego" in ids:
             raise ValueError("actor id 'ego' is reserved for the ego vehicle")
         return actors
@@ -193,10 +192,8 @@ class Scenario(_Model):
     @field_validator("signals")
     @classmethod
     def _one_shift_per_light(cls, signals: tuple[SignalShift, ...]) -> tuple[SignalShift, ...]:
-        ids = [s.tls for s in signals]
-        dup = {i for i in ids if ids.count(i) > 1}
-        if dup:
-            raise ValueError(f"more than one shift of traffic light(s) {sorted(dup)}")
+        if dup := _repeated([s.tls for s in signals]):
+            raise ValueError(f"more than one shift of traffic light(s) {dup}")
         return signals
 
     def network_path(self, base: str | Path | None = None) -> Path:
@@ -214,6 +211,11 @@ class Scenario(_Model):
             del data["signals"]
         blob = json.dumps(data, sort_keys=True, separators=(",", ":")).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def _repeated(ids: list[str]) -> list[str]:
+    """The ids that occur more than once, sorted."""
+    return sorted({i for i in ids if ids.count(i) > 1})
 
 
 def lane_edge(lane_id: str) -> str:
