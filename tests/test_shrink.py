@@ -88,3 +88,22 @@ def test_drivefuzz_shrink_writes_a_replayable_minimal_finding(tmp_path, town_sce
     assert report["after"]["knobs"] == 0  # speeding needs no weather
     result = CliRunner().invoke(main, ["replay", str(found.path / "minimal")])
     assert result.exit_code == 0 and "reproduced: speeding" in result.output, result.output
+
+
+def test_ddmin_keeps_the_one_puddle_the_failure_needs_whatever_was_removed_before():
+    """The search itself, with a predicate for the run: the failure needs the puddle at x = 320 (the third
+    of three) and the walker. Removing the first puddles renumbers the rest; candidates are cut from the
+    scenario the search started from, so the needed puddle is never lost or swapped."""
+    from drivefuzz.oracle import Misbehavior
+
+    sc = _walker_in_the_lane().model_copy(update={"puddles": tuple(
+        Puddle(x=300.0 + 10 * i, y=300.0, length=6.0, width=4.0, friction=0.3) for i in range(3))})
+    m = Misbehavior(oracle="collision", kind="pedestrian", frame=100, time=5.0, position=(0.0, 0.0), actors=("p0",))
+
+    def run(s):  # fails (the same way) only with the walker and the puddle at x = 320
+        fails = any(p.x == 320.0 for p in s.puddles) and any(a.id == "p0" for a in s.actors)
+        return ([m], None) if fails else ([], None)
+
+    out = shrink(sc, m, "sig", run, lambda s, mb, trace: "sig", budget=60)
+    assert [p.x for p in out.scenario.puddles] == [320.0]
+    assert [a.id for a in out.scenario.actors] == ["p0"]

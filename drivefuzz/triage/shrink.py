@@ -125,7 +125,8 @@ def shrink(scenario: Scenario, original: Misbehavior, signature: str, run: Run, 
     cut = _cut_window(scenario, original)
     if cut != scenario and not test.exhausted and (m := test(cut)) is not None:
         best, best_m = cut, m
-    comps = _components(best)
+    base = best  # components are named in it (puddles by index): candidates are always cut from it
+    comps = _components(base)
     n = 2
     while len(comps) >= 1 and not test.exhausted:
         chunks = [comps[i * len(comps) // n:(i + 1) * len(comps) // n] for i in range(n)]
@@ -133,7 +134,7 @@ def shrink(scenario: Scenario, original: Misbehavior, signature: str, run: Run, 
             if test.exhausted:
                 break
             rest = [c for c in comps if c not in chunk]
-            cand = _keep(best, set(rest))
+            cand = _keep(base, set(rest))
             if (m := test(cand)) is not None:
                 best, best_m, comps = cand, m, rest
                 n = max(n - 1, 2)
