@@ -193,7 +193,8 @@ class SeedJob:
         ckpt = json.loads(ckpt_path.read_text()) if ckpt_path.exists() else {}
         schedule = Schedule.from_json(cfg.schedule, ckpt.get("schedule"), cfg.feedback)
         runner = _Runner(cfg)
-        store = FindingStore(self.out, mutator.rmap, runner.misbehaviors, TriageConfig(reproduce=cfg.reproduce, shrink=cfg.shrink),
+        store = FindingStore(self.out, mutator.rmap, runner.misbehaviors,
+                             TriageConfig(reproduce=cfg.reproduce, shrink=cfg.shrink),
                              {"oracles": cfg.oracles.settings, "exec_timeout_s": cfg.exec_timeout_s})
 
         def execute(key: str, scenario, parent, description: str, retries: int, t_mutate: float,
