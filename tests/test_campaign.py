@@ -122,23 +122,9 @@ def test_a_batch_system_that_is_not_installed_is_one_line(tmp_path):
     assert not (tmp_path / "o").exists()  # nothing written: the fixed file can use the same directory
 
 
-STARVING = f"""
-[campaign]
-budget = "3s"
-cycles = 2
-population = 2
-seeds_per_network = 1
-time_limit = 20
-
-[matrix]
-networks = ["{ROOT / 'networks' / 'intersection.net.xml'}"]
-strategies = ["all", "entropy"]
-seeds = [0]
-
-[run]
-where = "local"
-jobs = 1
-"""
+STARVING = (SMALL.replace("max_execs = 2", 'budget = "3s"').replace("time_limit = 30", "time_limit = 20")
+            .replace(str(TOWN), str(ROOT / "networks" / "intersection.net.xml")).replace("jobs = 2", "jobs = 1")
+            .replace('ads = [{name = "ego", options = {fault = "speeding"}}]\n', ""))
 
 
 def test_a_cell_budget_counts_from_its_first_job_not_from_the_queue(tmp_path):
