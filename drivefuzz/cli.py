@@ -89,6 +89,8 @@ def _ads_from_the_command_line(_ctx, _param, value):
     for name in (value if isinstance(value, tuple) else [value] if value else []):
         allow_current_folder(name)
     return value
+
+
 #: at most this many local workers per CPU: more only queue, each holding a SUMO and semaphores
 JOBS_PER_CPU = 4
 
@@ -689,18 +691,23 @@ def _load_finding(finding: str, ads_name: str | None):
     from drivefuzz.oracle import OracleSettings
     from drivefuzz.scenario.sumofiles import read_scenario
 
-    folder = Path(finding)
-    vpath = folder / "verdict.json"
-    if not vpath.is_file():
-        raise InvalidConfig(finding, None, "not a finding directory (no verdict.json)", "findings/<n>-<oracle>-<hash>/")
-    verdict, want = _read_verdict(vpath)
+    folder, verdict, want = _finding_verdict(finding)
     sc = read_scenario(folder)
     _check_runnable(sc, str(folder / "scenario.json"))
     if ads_name is not None and ads_name != sc.ads.name:
         raise InvalidConfig("--ads", ads_name, f"the finding was made with {sc.ads.name!r}",
                             f"--ads {sc.ads.name} (to trust it)")
     check_trusted(sc.ads.name, str(folder / "scenario.json"), "ads.name", command_line=ads_name)
-    return folder, verdict, want, sc, OracleSettings(settings=verdict["oracles"]).instantiate(source=str(vpath))
+    return folder, verdict, want, sc, OracleSettings(settings=verdict["oracles"]).instantiate(
+        source=str(folder / "verdict.json"))
+
+
+def _finding_verdict(finding: str):
+    """(folder, its checked verdict.json, the first Misbehavior) of a finding folder."""
+    folder = Path(finding)
+    if not (folder / "verdict.json").is_file():
+        raise InvalidConfig(finding, None, "not a finding directory (no verdict.json)", "findings/<n>-<oracle>-<hash>/")
+    return (folder, *_read_verdict(folder / "verdict.json"))
 
 
 # -------------------------------------------------------------------------- shrink
@@ -738,11 +745,7 @@ def export_cmd(finding, fmt, out):
     from drivefuzz.sim.trace import Trace
     from drivefuzz.triage.export import export_openscenario, validate_openscenario
 
-    folder = Path(finding)
-    vpath = folder / "verdict.json"
-    if not vpath.is_file():
-        raise InvalidConfig(finding, None, "not a finding directory (no verdict.json)", "findings/<sig>-<oracle>/")
-    _verdict, want = _read_verdict(vpath)
+    folder, _verdict, want = _finding_verdict(finding)
     if not (folder / "trace").is_dir():
         raise InvalidConfig(str(folder), "trace", "the finding has no trace (a crash or hang)", "a finding of an oracle")
     out_dir = Path(out) if out else folder / "openscenario"

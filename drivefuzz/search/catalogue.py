@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 import random
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, NamedTuple
 
 from drivefuzz.scenario import Actor, ActorKind, Maneuver, ManeuverAction, NavType, Puddle, Scenario, SignalShift
 from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN
@@ -24,11 +24,21 @@ from drivefuzz.search.fairness import lane_limit, unfair
 from drivefuzz.search.mutate import Mutation, Mutator
 
 
+class Built(NamedTuple):
+    """What a situation's builder adds (it returns a plain 4- or 5-tuple of these)."""
+
+    actors: list[Actor]
+    puddles: list[Puddle]
+    weather: dict  # an update of the scenario's weather
+    description: str
+    signals: tuple[SignalShift, ...] = ()  # shifted traffic lights
+
+
 @dataclass(frozen=True)
 class Situation:
     name: str
     nhtsa: str  # the pre-crash scenario it recreates (Najm et al. 2007)
-    #: (actors, puddles, weather update, description[, signal shifts]), or None when not possible this time
+    #: the fields of :class:`Built`, or None when not possible this time
     build: Callable[[Mutator, Scenario, random.Random], tuple | None]
 
 
@@ -38,8 +48,8 @@ def add_situation(mut: Mutator, sc: Scenario, situation: Situation, rng: random.
         built = situation.build(mut, sc, rng)
         if built is None:
             continue
-        actors, puddles, weather, desc = built[:4]
-        shifts: tuple[SignalShift, ...] = tuple(built[4]) if len(built) > 4 else ()
+        actors, puddles, weather, desc, shifts = Built(*built)
+        shifts = tuple(shifts)
         new = sc
         ok = True
         for actor in actors:

@@ -192,9 +192,7 @@ def _blame(what: str, name: str, where: str):
 
 def _run(sim, scenario: Scenario, rmap, ads: ADS, oracles: list[Oracle], params: VehicleParams,
          stop_on_misbehavior: bool, wall0: float, view: "GuiView | None" = None) -> Execution:
-    run = _Run(sim, scenario, rmap, ads, oracles, params, stop_on_misbehavior, wall0)
-    run.view = view
-    return run.run()
+    return _Run(sim, scenario, rmap, ads, oracles, params, stop_on_misbehavior, wall0, view).run()
 
 
 class _Run:
@@ -205,7 +203,7 @@ class _Run:
     """
 
     def __init__(self, sim, scenario: Scenario, rmap, ads: ADS, oracles: list[Oracle], params: VehicleParams,
-                 stop_on_misbehavior: bool, wall0: float):
+                 stop_on_misbehavior: bool, wall0: float, view: GuiView | None = None):
         self.sim, self.scenario, self.rmap, self.ads, self.oracles = sim, scenario, rmap, ads, oracles
         self.params, self.stop_on_misbehavior, self.wall0 = params, stop_on_misbehavior, wall0
         self.dt = dt = scenario.sim.step_length
@@ -227,7 +225,7 @@ class _Run:
         self.misbehaviors: list[Misbehavior] = []
         self.steer = self.throttle = self.brake = 0.0
         self.time_limit = scenario.sim.time_limit
-        self.view: GuiView | None = None  # sumo-gui's pacing and view (replay --gui)
+        self.view = view  # sumo-gui's pacing and view (replay --gui)
 
     def run(self) -> Execution:
         """Set up, then tick in the module docstring's order until the run terminates."""

@@ -395,11 +395,10 @@ class _Event:
             return None
         return {fl for fl, _tl, _via in self.rmap.connections(edge, route[route.index(edge) + 1])}
 
-    def _leading_on(self, free: list[str], blocked: Mapping[str, str]) -> list[str]:
+    def _leading_on(self, free: list[str], blocked: Mapping[str, str], leads: set[str] | None) -> list[str]:
         """The free lanes that are a way forward along the route: a lane that connects to the route's next
         edge, or one the ego can pass the blocker on and still merge back (:data:`MERGE_ROOM` before the
-        end of a blocked lane that connects)."""
-        leads = self._leads()
+        end of a blocked lane that connects); ``leads``: :meth:`_leads`."""
         if leads is None:
             return free
         out = [l for l in free if l in leads]
@@ -410,11 +409,10 @@ class _Event:
                 return free
         return []
 
-    def _room_to_pass(self, lanes: Mapping[str, str]) -> list[str]:
+    def _room_to_pass(self, lanes: Mapping[str, str], leads: set[str] | None) -> list[str]:
         """The blocked lanes that do not block the way: a neighbour of a lane that leads on, whose
         stationary body stands at least :data:`MERGE_ROOM` (bumper to bumper) beyond that lane's blocker,
         which has the same room after it. The ego can pass the blocker there and merge back in front of it."""
-        leads = self._leads()
         out = set()
         for l, body in lanes.items():
             if (leads is not None and l not in leads) or self._room_after(l, body) < MERGE_ROOM:
@@ -448,9 +446,10 @@ class _Event:
             self.replay_may_settle = True  # the rules may have missed a blocker (mid-turn in a junction)
             return self.ego(f"the ego stood still with nothing blocking its way ({self.mb.oracle}/{self.mb.kind})")
         lanes, free, queue = blocked
-        passable = self._room_to_pass(lanes)
+        leads = self._leads()
+        passable = self._room_to_pass(lanes, leads)
         lanes = {l: b for l, b in lanes.items() if l not in passable}
-        free = self._leading_on(free + passable, lanes)
+        free = self._leading_on(free + passable, lanes, leads)
         ev = {"lanes": {l: b for l, b in lanes.items()}, "free_lanes": free}
         own = lanes.get(str(trace["lane"][f]))
         if own is not None and actor_track(trace, own).kind == "pedestrian":
@@ -458,7 +457,6 @@ class _Event:
         if not free and lanes:
             what = ", ".join(f"{l} by {b}" for l, b in lanes.items())
             return self.other(f"every lawful way forward is blocked by stationary bodies: {what}", **ev)
-        leads = self._leads()
         if queue is not None and (leads is None or str(trace["lane"][f]) in leads):  # a queue on the way on
             return self.other(f"the queue ahead is itself blocked: {queue}", queue=queue, **ev)
         behind = own or next(iter(lanes.values()), None)  # mid-lane-change: the blocker of the lane it wants
