@@ -22,6 +22,7 @@ from drivefuzz.scenario.model import (  # noqa: F401  (re-exported)
     Scenario,
     SignalShift,
     SimOptions,
+    Trigger,
     Weather,
     lane_edge,
     lane_index,

@@ -60,15 +60,39 @@ class NavType(str, Enum):
 
 
 class ManeuverAction(str, Enum):
-    SPEED = "speed"  # set the target speed to ``value`` [m/s]
+    SPEED = "speed"  # set the target speed to ``value`` [m/s], at ``rate`` [m/s^2] (0: SUMO's own)
     LANE_LEFT = "lane_left"  # change one lane to the left, taking ``value`` [s]
     LANE_RIGHT = "lane_right"  # change one lane to the right, taking ``value`` [s]
+    NUDGE_LEFT = "nudge_left"  # an aborted lane change: ``depth`` [m] to the left and back, in ``value`` [s]
+    NUDGE_RIGHT = "nudge_right"  # the same to the right
+
+
+class Trigger(str, Enum):
+    """When a step of a maneuver program fires. Steps fire in order: a step is considered only once the
+    one before it has fired. ``GAP`` and ``HEADWAY`` time the step against the ego, so that the situation
+    survives a change of the ego's speed; they fire when the measure crosses ``at`` (or at their first look
+    if it is already within 0.5 m or 0.05 s of it), and not before ``time`` s after the actor departed."""
+
+    TIME = "time"  # ``time`` s after the actor departed
+    AFTER = "after"  # ``time`` s after the step before fired (after departing, for the first step)
+    GAP = "gap"  # the actor's rear is ``at`` m ahead of the ego's front along the ego's heading (< 0: behind)
+    HEADWAY = "headway"  # the same gap is ``at`` s of the ego's speed (at least 1 m/s)
+
+
+#: [m] how far an aborted lane change may reach sideways (a lane is about 3.5 m wide)
+MAX_NUDGE = 2.5
 
 
 class Maneuver(_Model):
-    time: float = Field(ge=0.0, le=MAX_TIME, description="[s] after the actor departs")
+    time: float = Field(ge=0.0, le=MAX_TIME, description="[s] see Trigger")
     action: ManeuverAction
-    value: float = Field(ge=0.0, le=MAX_SPEED, description="[m/s] for speed, [s] duration for lane changes")
+    value: float = Field(ge=0.0, le=MAX_SPEED, description="[m/s] for speed, [s] duration for lane changes "
+                                                            "and nudges")
+    trigger: Trigger = Trigger.TIME
+    at: float = Field(default=0.0, ge=-1e3, le=1e3, description="[m] for gap, [s] for headway triggers")
+    rate: float = Field(default=0.0, ge=0.0, le=12.0, description="[m/s^2] speed: how fast to reach the "
+                                                                  "speed (0: SUMO's own)")
+    depth: float = Field(default=0.0, ge=0.0, le=MAX_NUDGE, description="[m] nudges: how far sideways")
 
 
 class Mission(_Model):

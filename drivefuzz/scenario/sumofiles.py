@@ -53,6 +53,9 @@ MANIFEST = "scenario.json"
 ROUTES = "routes.rou.xml"
 ADDITIONAL = "fuzz.add.xml"
 SUMOCFG = "scenario.sumocfg"
+#: [s] how long a lane change of SUMO's own drivers takes (SUMO's continuous lane-change model): without it a
+#: car jumps 3.5 m sideways in one step. A maneuver's lane change takes its own duration (sim/world.py).
+LANE_CHANGE_DURATION = 3.0
 
 EGO_ID = "ego"
 EGO_TYPE = "drivefuzz_ego"
@@ -206,7 +209,8 @@ def sumocfg_xml(net_rel: str, step_length: float, time_limit: float) -> str:
         f'<additional-files value="{ADDITIONAL}"/></input>\n'
         f'    <time><begin value="0"/><end value="{time_limit!r}"/><step-length value="{step_length!r}"/></time>\n'
         '    <processing><time-to-teleport value="-1"/><collision.action value="warn"/>'
-        '<collision.check-junctions value="true"/></processing>\n'
+        '<collision.check-junctions value="true"/>'
+        f'<lanechange.duration value="{LANE_CHANGE_DURATION!r}"/></processing>\n'
         '    <random_number><seed value="0"/></random_number>\n'
         "</configuration>\n"
     )

@@ -10,6 +10,11 @@ no driver could get out of. After every placement, position, timing or speed cha
   where the ego is expected to be by then (or inside a follower's stopping distance behind it);
 - **walkers step out in time**: a jaywalker must reach the ego's path either after the ego has passed or
   while the ego can still stop before it (careful braking ``EGO_DECEL`` after ``REACTION``);
+- **cut-ins leave room**: a maneuver program's lane change or nudge is triggered by the gap or the headway to
+  the ego (or by the clock, with SUMO's own safety gaps), and its gap leaves a careful driver room to react to
+  the closing speed and brake (:func:`drivefuzz.search.programs.cut_in_gap`); a program's vehicle that starts
+  on a lane beside the ego's is not a follower of the ego, and one that appears ahead of it later needs room
+  only for the speed the ego must shed, not for a full stop;
 - **obstacles are not at the start**: an immobile actor stands at least ``MutationConfig.immobile_min_range``
   metres ahead of the ego's start along its route (or behind it);
 - **obstacles leave a way on**: an immobile vehicle on the ego's route (or a walker standing or walking on a
@@ -28,7 +33,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from drivefuzz.scenario import Actor, ActorKind, NavType, Scenario
+from drivefuzz.scenario import Actor, ActorKind, ManeuverAction, NavType, Scenario, Trigger
 from drivefuzz.scenario.model import EGO_LENGTH
 from drivefuzz.scenario.roadmap import PASSENGER
 
@@ -42,6 +47,7 @@ MARGIN = 2.0  # [m] left over after a stop
 VEHICLE_LENGTH = 5.0  # [m] SUMO's default passenger car
 MERGE_ROOM = 20.0  # [m] past an obstacle, to merge back into the only lane that leads on
 JUNCTION_EXIT = 15.0  # [m] the first metres of an edge after a junction: no obstacle there
+CUT_IN_MARGIN = 5.0  # [m] left over when a careful driver has braked for a vehicle that cut in
 
 
 def stopping_distance(speed: float, decel: float, reaction: float = 0.0) -> float:
@@ -85,6 +91,10 @@ def unfair(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
                 and mut.rmap.lane(actor.start_lane).allows(PASSENGER):  # no sidewalk: a slow obstacle
             return _blocks_the_route(mut, sc, actor)
         return None
+    if actor.nav is NavType.MANEUVER:
+        why = _program_unfair(mut, actor)
+        if why:
+            return why
     if d is None:
         return None
     if actor.nav is NavType.IMMOBILE and actor.depart <= 0.0 and 0.0 <= d < mut.cfg.immobile_min_range:
@@ -97,7 +107,10 @@ def unfair(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
     # SUMO's lane position of a vehicle is its front bumper
     gap_behind = ego_front - EGO_LENGTH - d  # actor's front -> ego's rear
     gap_ahead = d - VEHICLE_LENGTH - ego_front  # ego's front -> actor's rear
+    beside = actor.nav is NavType.MANEUVER and actor.start_lane != _ego_lane_at(mut, sc, actor.start_lane)
     if gap_behind > -1.0:  # starts behind the ego
+        if beside:  # on a lane beside the ego's: not its follower (its cut-ins are checked above)
+            return None
         if actor.nav is NavType.LINEAR:
             return "a reckless vehicle behind the ego (no driver can escape it)"
         need = stopping_distance(actor.speed, NPC_DECEL) + MARGIN
@@ -105,9 +118,40 @@ def unfair(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
             return f"{gap_behind:.1f} m behind the ego at {actor.speed:.1f} m/s, needs {need:.1f} m to stop"
         return None
     if actor.depart > 0.0:  # appears later, ahead of the ego (or on it)
-        need = stopping_distance(ego_v, EGO_DECEL, REACTION) + MARGIN
+        # a program's vehicle appears moving: the ego sheds only the speed difference
+        shed = max(ego_v - actor.speed, 0.0) if actor.nav is NavType.MANEUVER else ego_v
+        need = stopping_distance(shed, EGO_DECEL, REACTION) + MARGIN
         if gap_ahead < need:
             return f"appears {gap_ahead:.1f} m ahead of the ego at {actor.depart:.1f} s, it needs {need:.1f} m"
+    return None
+
+
+def _ego_lane_at(mut: "Mutator", sc: Scenario, lane_id: str) -> str | None:
+    """The lane the ego drives on ``lane_id``'s edge (None off its route)."""
+    route = mut._route(sc)
+    edge = mut.rmap.lane(lane_id).getEdge().getID()
+    return mut.ego_lane(sc, route.index(edge)) if edge in route else None
+
+
+def _program_unfair(mut: "Mutator", actor: Actor) -> str | None:
+    """A lane change or nudge timed against the ego must leave the room of :func:`cut_in_gap`; one timed by
+    the clock keeps SUMO's own safety gaps (sim/world.py), and one timed after a step before it is not
+    allowed (nothing would keep its gap)."""
+    from drivefuzz.search.programs import cut_in_gap
+
+    limit = lane_limit(mut, actor.start_lane)
+    closing = limit - actor.speed  # the ego at the limit: the most it closes in
+    for k, m in enumerate(actor.maneuvers):
+        if m.action in (ManeuverAction.SPEED,):
+            continue
+        if m.trigger is Trigger.AFTER:
+            return f"step {k} ({m.action.value}) is timed by the step before, not by the gap to the ego"
+        need = cut_in_gap(closing, m.value)
+        if m.trigger is Trigger.GAP and m.at < need:
+            return f"step {k} ({m.action.value}) starts {m.at:.1f} m ahead of the ego, needs {need:.1f} m"
+        if m.trigger is Trigger.HEADWAY and m.at * limit < need:
+            return (f"step {k} ({m.action.value}) starts at a headway of {m.at:.2f} s, needs "
+                    f"{need / limit:.2f} s at {limit:.1f} m/s")
     return None
 
 

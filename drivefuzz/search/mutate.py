@@ -50,6 +50,7 @@ from drivefuzz.scenario import (
     NavType,
     Puddle,
     Scenario,
+    Trigger,
     Weather,
 )
 
@@ -237,7 +238,7 @@ class Mutator(RoutePlacement):
             other = NavType.IMMOBILE if nav is NavType.LINEAR else NavType.LINEAR
             return self._first_feasible(sc, rng, [(kind, nav), (kind, other)])
         if strategy == "maneuver":
-            return self.add_actor(sc, rng, ActorKind.VEHICLE, NavType.MANEUVER)
+            return self.add_program(sc, rng)
         if strategy == "all":
             navs = [NavType.AUTOPILOT, NavType.LINEAR, NavType.IMMOBILE, NavType.MANEUVER]
             nav = rng.choice(navs)
@@ -247,6 +248,21 @@ class Mutator(RoutePlacement):
             return self._first_feasible(sc, rng, [(kind, nav)] + [
                 (ActorKind.VEHICLE if n is NavType.MANEUVER else kind, n) for n in rest])
         raise ValueError(f"unknown strategy {strategy!r}")
+
+    def add_program(self, sc: Scenario, rng: random.Random) -> Mutation:
+        """One of the adversarial maneuver programs (:mod:`drivefuzz.search.programs`), the others in turn when
+        the mission does not offer what it needs (a lane beside the ego's), else a single-step maneuver."""
+        from drivefuzz.search.catalogue import add_situation
+        from drivefuzz.search.programs import PROGRAMS
+
+        retries = 0
+        for program in rng.sample(PROGRAMS, len(PROGRAMS)):
+            m = add_situation(self, sc, program, rng)
+            retries += m.retries
+            if m.scenario is not sc:
+                return Mutation(m.scenario, m.description, retries)
+        m = self.add_actor(sc, rng, ActorKind.VEHICLE, NavType.MANEUVER)
+        return Mutation(m.scenario, m.description, retries + m.retries)
 
     def _first_feasible(self, sc: Scenario, rng: random.Random, options: list[tuple[ActorKind, NavType]]) -> Mutation:
         """The first of ``options`` (kind, navigation) that can be placed fairly; else the last one's reason.
@@ -460,13 +476,37 @@ class Mutator(RoutePlacement):
             desc = f"{a.id} speed {a.speed:.1f} -> {speed:.1f} m/s"
         else:
             k = rng.randrange(len(a.maneuvers))
-            m = a.maneuvers[k]
-            t = round(max(m.time + rng.uniform(-1.5, 1.5), 0.0), 2)
+            m, step = a.maneuvers[k], self._mutate_step(a, a.maneuvers[k], rng)
             mans = list(a.maneuvers)
-            mans[k] = m.model_copy(update={"time": t})
-            update = {"maneuvers": tuple(sorted(mans, key=lambda mm: mm.time))}
-            desc = f"{a.id} maneuver {k} ({m.action.value}) at {m.time:.2f} -> {t:.2f} s"
+            mans[k] = step
+            if all(mm.trigger is Trigger.TIME for mm in mans):
+                mans.sort(key=lambda mm: mm.time)
+            update = {"maneuvers": tuple(mans)}
+            changed = {f: getattr(step, f) for f in ("time", "at", "value", "rate", "depth")
+                       if getattr(step, f) != getattr(m, f)}
+            desc = f"{a.id} maneuver {k} ({m.action.value}): " + (
+                ", ".join(f"{f} {getattr(m, f):g} -> {v:g}" for f, v in changed.items()) or "unchanged")
         return self._replace_actor(sc, i, update, desc, retries)
+
+    def _mutate_step(self, a: Actor, m: Maneuver, rng: random.Random) -> Maneuver:
+        """Step ``m`` of ``a``'s program with its timing (the clock, or the gap or headway to the ego) or one
+        of its parameters (speed, duration, braking rate, nudge depth) moved; fairness is checked after."""
+        aspect = rng.choice(["timing", "parameter"])
+        if aspect == "timing":
+            if m.trigger is Trigger.GAP:
+                return m.model_copy(update={"at": round(m.at + rng.uniform(-5.0, 5.0), 1)})
+            if m.trigger is Trigger.HEADWAY:
+                return m.model_copy(update={"at": round(max(m.at + rng.uniform(-0.5, 0.5), 0.1), 2)})
+            return m.model_copy(update={"time": round(max(m.time + rng.uniform(-1.5, 1.5), 0.0), 2)})
+        if m.action is ManeuverAction.SPEED:
+            if m.rate > 0.0 and rng.random() < 0.5:
+                return m.model_copy(update={"rate": round(min(max(m.rate * rng.uniform(0.6, 1.4), 0.5), 8.0), 1)})
+            limit = lane_limit(self, a.start_lane)
+            return m.model_copy(update={"value": round(min(max(m.value * rng.uniform(0.6, 1.4), 0.0),
+                                                               1.2 * limit), 2)})
+        if m.depth > 0.0 and rng.random() < 0.5:
+            return m.model_copy(update={"depth": round(min(max(m.depth * rng.uniform(0.6, 1.4), 0.3), 2.5), 2)})
+        return m.model_copy(update={"value": round(min(max(m.value * rng.uniform(0.6, 1.4), 1.0), 5.0), 2)})
 
     def _replace_actor(self, sc: Scenario, i: int, update: dict, desc: str, retries: int = 0) -> Mutation:
         """``sc`` with actor ``i`` changed by ``update``; unchanged (and said so) when that would be unfair."""

@@ -62,7 +62,7 @@ from drivefuzz.sim.physics import VehicleParams, VehiclePhysics, place_state
 from drivefuzz.sim.gui import GuiView
 from drivefuzz.scenario.roadmap import load_roadmap
 from drivefuzz.scenario import Scenario
-from drivefuzz.scenario.sumofiles import ADDITIONAL, EGO_ID, ROUTES, write_scenario
+from drivefuzz.scenario.sumofiles import ADDITIONAL, EGO_ID, LANE_CHANGE_DURATION, ROUTES, write_scenario
 from drivefuzz.sim.trace import Recorder, Trace
 from drivefuzz.sim.world import (
     ActorDriver,
@@ -106,6 +106,7 @@ def _sumo_args(scenario: Scenario, folder: Path, net: Path, gui: bool) -> list[s
         "--step-length", repr(scenario.sim.step_length),
         "--seed", str(scenario.seed % 2**31),
         "--time-to-teleport", "-1",
+        "--lanechange.duration", repr(LANE_CHANGE_DURATION),
         # an actor that cannot enter where and when it was placed (the spot is taken) is dropped: entering
         # later, wherever the spot then is free, it would be a situation no fairness rule checked
         "--max-depart-delay", repr(MAX_DEPART_DELAY),
@@ -523,7 +524,8 @@ class _Run:
         """9-10. Per-step actor commands (linear, maneuver schedules, jaywalking), then step SUMO."""
         perf = time.perf_counter
         t9 = perf()
-        self.driver.step(self.t, self.vids, self.pids)
+        self.driver.step(self.t, self.vids, self.pids,
+                         (self.ex, self.ey, self.ch, self.sh, self.state.speed, self.half_len))
         self.sim.simulationStep()
         self.timings["sumo"] += perf() - t9
         if self.view is not None:

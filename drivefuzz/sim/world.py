@@ -7,6 +7,7 @@ Used only by :mod:`drivefuzz.sim.execute`, which passes in the simulation module
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from itertools import chain, compress, repeat
 from typing import Sequence
 
@@ -14,7 +15,7 @@ import numpy as np
 
 from drivefuzz.ads import OBSERVATION_RADIUS, ObjectState
 from drivefuzz.oracle import Obstacle
-from drivefuzz.scenario import ActorKind, ManeuverAction, NavType, Scenario
+from drivefuzz.scenario import ActorKind, Maneuver, ManeuverAction, NavType, Scenario, Trigger
 from drivefuzz.sim.trace import Recorder
 
 #: POI/polygon types the collision oracle treats as solid (a user's polygon file may use them).
@@ -51,15 +52,43 @@ class Puddles:
         return mu
 
 
+#: SUMO speedFactor of maneuver actors: their programs may drive them above the lane's limit (up to 1.3 x)
+MANEUVER_SPEED_FACTOR = 1.3
+#: [m], [s]: a gap or headway trigger within this of its value fires at its first look
+GAP_TOLERANCE, HEADWAY_TOLERANCE = 0.5, 0.05
+#: [m] gap and headway triggers fire only while the actor is at most this far to the side of the ego
+TRIGGER_LATERAL = 10.0
+#: [m/s^2] SUMO's default deceleration and acceleration of a passenger car (a program may ask for more)
+SUMO_DECEL, SUMO_ACCEL = 4.5, 2.6
+
+
+@dataclass
+class _Program:
+    """Where a maneuver actor is in its program."""
+
+    k: int = 0  # the next step
+    fired: float = 0.0  # [s] when the step before fired (the departure for the first)
+    above: bool | None = None  # whether the gap or headway was above the next step's ``at`` at the last look
+    ramp: tuple[float, float] | None = None  # (target speed [m/s], rate [m/s^2]) of a speed step under way
+    nudge: tuple[float, float, float] | None = None  # (start [s], duration [s], signed depth [m], left > 0)
+
+
 class ActorDriver:
-    """Applies the behaviour carried in the scenario's params to SUMO actors each step."""
+    """Applies the behaviour carried in the scenario's params to SUMO actors each step.
+
+    Maneuver actors run their programs (:class:`~drivefuzz.scenario.Maneuver` steps, in order): speed steps
+    at SUMO's own or a given rate; lane changes in SUMO's continuous lane-change model, taking the step's
+    duration (the lateral speed is the lane's width over it); nudges (aborted lane changes) as a lateral
+    offset in the lane, out and back along a sine. A step timed against the ego forces its lane change
+    (lane-change mode 0): the trigger, chosen fair by the mutator, is what keeps the gap.
+    """
 
     def __init__(self, sim, scenario: Scenario, rmap):
         self.sim = sim
         self.rmap = rmap
         self.spec = {a.id: a for a in scenario.actors}
         self.started: set[str] = set()
-        self.maneuver_next: dict[str, int] = {}
+        self.programs: dict[str, _Program] = {}
         #: pedestrians the executor moves itself: [x, y, ux, uy, remaining [m], speed of the last step [m/s]]
         self.walkers: dict[str, list[float]] = {}
         self.dt = scenario.sim.step_length
@@ -79,8 +108,9 @@ class ActorDriver:
                 sim.vehicle.setMaxSpeed(actor_id, max(a.speed, 0.1))
             elif a.nav is NavType.MANEUVER:
                 sim.vehicle.setMaxSpeed(actor_id, max(a.speed, 0.1))
+                sim.vehicle.setSpeedFactor(actor_id, MANEUVER_SPEED_FACTOR)
                 sim.vehicle.setLaneChangeMode(actor_id, 512)
-                self.maneuver_next[actor_id] = 0
+                self.programs[actor_id] = _Program(fired=t)
         elif a.nav in (NavType.IMMOBILE, NavType.LINEAR):
             # SUMO puts a person's stop beside the lane (~3 m off a 2 m sidewalk): stand on the lane instead
             x, y, h = self.rmap.geom(a.start_lane).position(a.start_pos)
@@ -96,26 +126,25 @@ class ActorDriver:
         elif a.nav is NavType.AUTOPILOT:
             sim.person.setSpeed(actor_id, max(a.speed, 0.05))
 
-    def step(self, t: float, alive_vehicles: Sequence[str], alive_persons: Sequence[str]) -> None:
+    def step(self, t: float, alive_vehicles: Sequence[str], alive_persons: Sequence[str],
+             ego: tuple[float, float, float, float, float, float] | None = None) -> None:
+        """One step's actor commands. ``ego``: (x, y, cos, sin of its heading, speed, half its length) [m, m/s],
+        for the program steps timed against it."""
         sim = self.sim
-        if self.maneuver_next:
+        if self.programs:
             alive = set(alive_vehicles)
-            for vid, k in list(self.maneuver_next.items()):
-                a = self.spec[vid]
+            for vid, p in self.programs.items():
                 if vid not in alive:
                     continue
-                while k < len(a.maneuvers) and t - a.depart >= a.maneuvers[k].time:
-                    m = a.maneuvers[k]
-                    if m.action is ManeuverAction.SPEED:
-                        sim.vehicle.setSpeed(vid, m.value)
-                    else:
-                        idx = sim.vehicle.getLaneIndex(vid) + (1 if m.action is ManeuverAction.LANE_LEFT else -1)
-                        lane = sim.vehicle.getLaneID(vid)
-                        n_lanes = sim.edge.getLaneNumber(sim.lane.getEdgeID(lane)) if lane else 0
-                        if 0 <= idx < n_lanes:
-                            sim.vehicle.changeLane(vid, idx, max(m.value, self.dt))
-                    k += 1
-                self.maneuver_next[vid] = k
+                steps = self.spec[vid].maneuvers
+                while p.k < len(steps) and self._due(vid, steps[p.k], p, t, ego):
+                    self._start(vid, steps[p.k], p, t)
+                    p.k += 1
+                    p.fired, p.above = t, None
+                if p.ramp is not None:
+                    self._ramp(vid, p)
+                if p.nudge is not None:
+                    self._nudge(vid, p, t)
         if self.walkers:
             alive = set(alive_persons)
             for pid, w in list(self.walkers.items()):
@@ -134,6 +163,74 @@ class ActorDriver:
                 w[5] = step / self.dt
                 angle = (90.0 - math.degrees(math.atan2(w[3], w[2]))) % 360.0
                 sim.person.moveToXY(pid, "", w[0], w[1], angle, 2)
+
+
+    def _due(self, vid: str, m: Maneuver, p: _Program, t: float, ego) -> bool:
+        """Whether step ``m`` of ``vid``'s program fires at ``t`` (see :class:`~drivefuzz.scenario.Trigger`)."""
+        depart = self.spec[vid].depart
+        if m.trigger is Trigger.TIME:
+            return t - depart >= m.time - 1e-9
+        if m.trigger is Trigger.AFTER:
+            return t - p.fired >= m.time - 1e-9
+        if ego is None or t - depart < m.time - 1e-9:
+            return False
+        ex, ey, ch, sh, speed, half = ego
+        fx, fy = self.sim.vehicle.getPosition(vid)
+        h = math.radians(90.0 - self.sim.vehicle.getAngle(vid))
+        length = self.sim.vehicle.getLength(vid)
+        dx, dy = fx - 0.5 * length * math.cos(h) - ex, fy - 0.5 * length * math.sin(h) - ey
+        if abs(-sh * dx + ch * dy) > TRIGGER_LATERAL:
+            return False
+        gap = ch * dx + sh * dy - 0.5 * length - half
+        value, tol = (gap, GAP_TOLERANCE) if m.trigger is Trigger.GAP else (gap / max(speed, 1.0), HEADWAY_TOLERANCE)
+        above = value > m.at
+        crossed = p.above is not None and above != p.above
+        p.above = above
+        return crossed or abs(value - m.at) <= tol
+
+    def _start(self, vid: str, m: Maneuver, p: _Program, t: float) -> None:
+        sim = self.sim
+        if m.action is ManeuverAction.SPEED:
+            if m.rate > 0.0:
+                p.ramp = (m.value, m.rate)
+                sim.vehicle.setDecel(vid, max(SUMO_DECEL, m.rate))
+                sim.vehicle.setAccel(vid, max(SUMO_ACCEL, m.rate))
+            else:
+                p.ramp = None
+                sim.vehicle.setSpeed(vid, m.value)
+        elif m.action in (ManeuverAction.NUDGE_LEFT, ManeuverAction.NUDGE_RIGHT):
+            side = 1.0 if m.action is ManeuverAction.NUDGE_LEFT else -1.0
+            p.nudge = (t, max(m.value, 2 * self.dt), side * m.depth)
+        else:
+            lane = sim.vehicle.getLaneID(vid)
+            if not lane or lane.startswith(":"):
+                return
+            idx = sim.vehicle.getLaneIndex(vid) + (1 if m.action is ManeuverAction.LANE_LEFT else -1)
+            if 0 <= idx < sim.edge.getLaneNumber(sim.lane.getEdgeID(lane)):
+                duration = max(m.value, self.dt)
+                sim.vehicle.setMaxSpeedLat(vid, sim.lane.getWidth(lane) / duration)
+                if m.trigger in (Trigger.GAP, Trigger.HEADWAY):
+                    sim.vehicle.setLaneChangeMode(vid, 0)
+                sim.vehicle.changeLane(vid, idx, duration)
+
+    def _ramp(self, vid: str, p: _Program) -> None:
+        """One step of a speed step with a rate: the commanded speed moves ``rate * dt`` towards the target."""
+        target, rate = p.ramp
+        v = self.sim.vehicle.getSpeed(vid)
+        dv = rate * self.dt
+        v = min(v + dv, target) if v < target else max(v - dv, target)
+        self.sim.vehicle.setSpeed(vid, v)
+        if v == target:
+            p.ramp = None
+
+    def _nudge(self, vid: str, p: _Program, t: float) -> None:
+        t0, duration, depth = p.nudge
+        u = (t - t0) / duration
+        if u >= 1.0:
+            p.nudge = None
+            self.sim.vehicle.setLateralLanePosition(vid, 0.0)
+        else:
+            self.sim.vehicle.setLateralLanePosition(vid, depth * math.sin(math.pi * u))
 
 
 def tls_link_table(sim) -> dict[str, tuple[tuple[str, ...], list[tuple[str, int, str, str]]]]:

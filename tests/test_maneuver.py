@@ -1,0 +1,165 @@
+"""Maneuver programs (issue 14): lane changes that take their duration, nudges, braking rates, triggers timed
+against the ego, and the programs' fairness. Real SUMO on the bundled highway (lanes run along +x)."""
+
+from __future__ import annotations
+
+import random
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from drivefuzz.scenario import Actor, Maneuver, Mission, Scenario, SimOptions, Trigger
+from drivefuzz.scenario.roadmap import load_roadmap
+from drivefuzz.scenario.seed import list_seeds
+from drivefuzz.scenario.sumofiles import load_scenario
+from drivefuzz.search.catalogue import add_situation
+from drivefuzz.search.fairness import unfair
+from drivefuzz.search.mutate import Mutator
+from drivefuzz.search.programs import PROGRAMS, cut_in_gap
+from drivefuzz.sim.execute import execute
+
+ROOT = Path(__file__).resolve().parents[1]
+NET = ROOT / "networks" / "highway.net.xml"
+LANE_WIDTH = 3.5  # [m] of every highway lane
+
+
+def highway(*actors: Actor, time_limit: float = 20.0) -> Scenario:
+    """The ego from hw0's middle lane to hw2, with ``actors``."""
+    return Scenario(network=str(NET), mission=Mission(start_lane="hw0_1", start_pos=20.0, goal_edge="hw2",
+                                                      goal_pos=150.0, start_speed=20.0),
+                    sim=SimOptions(time_limit=time_limit), seed=3, actors=actors)
+
+
+def npc(lane: str, pos: float, speed: float, *steps: Maneuver, depart: float = 0.0) -> Actor:
+    return Actor(id="v0", kind="vehicle", nav="maneuver", start_lane=lane, start_pos=pos, speed=speed,
+                 depart=depart, dest_edge="hw2", maneuvers=steps)
+
+
+def track(ex, actor_id: str = "v0"):
+    """(t, x, y, speed) of an actor's centre over the frames it was in."""
+    a = ex.trace.actors
+    rows = a.actor == a.ids.index(actor_id)
+    return ex.trace["t"][a.frame[rows]], a.x[rows], a.y[rows], a.speed[rows]
+
+
+def front_y(ex, actor_id: str = "v0"):
+    """y [m] of an actor's front bumper: what SUMO's lane change moves at a constant lateral speed (the
+    centre follows as the body turns back straight)."""
+    a = ex.trace.actors
+    j = a.ids.index(actor_id)
+    rows = a.actor == j
+    return a.y[rows] + 0.5 * a.length[j] * np.sin(a.heading[rows])
+
+
+def lateral_move(t, y):
+    """(start, end) [s] of the one lateral move in ``y``: from 5 % to 95 % of the way."""
+    total = y[-1] - y[0]
+    frac = (y - y[0]) / total
+    return float(t[np.argmax(frac > 0.05)]), float(t[np.argmax(frac > 0.95)])
+
+
+@pytest.mark.parametrize("duration", [1.5, 3.0])
+def test_a_lane_change_takes_its_requested_duration(duration):
+    # a car 40 m ahead on the right lane changes into the ego's lane at 1 s
+    ex = execute(highway(npc("hw0_0", 60.0, 20.0, Maneuver(time=1.0, action="lane_left", value=duration))),
+                 oracles=[], stop_on_misbehavior=False)
+    t, x, y, _ = track(ex)
+    assert y[-1] - y[0] == pytest.approx(LANE_WIDTH, abs=0.05)  # one lane to the left (+y)
+    y = front_y(ex)
+    start, end = lateral_move(t, y)
+    assert start == pytest.approx(1.0 + 0.05 * duration, abs=0.1)
+    assert end - start == pytest.approx(0.9 * duration, abs=0.15)  # 5 % -> 95 % of a move at constant speed
+    step = np.abs(np.diff(y)).max()
+    assert step <= LANE_WIDTH / duration * ex.trace.step_length * 1.05  # no jump: one step moves w / T * dt
+
+
+def test_a_nudge_goes_out_and_comes_back():
+    ex = execute(highway(npc("hw0_0", 60.0, 20.0, Maneuver(time=1.0, action="nudge_left", value=3.0, depth=1.5))),
+                 oracles=[], stop_on_misbehavior=False)
+    t, _, y, _ = track(ex)
+    assert y.max() - y[0] == pytest.approx(1.5, abs=0.05)
+    peak = float(t[np.argmax(y)])
+    assert peak == pytest.approx(1.0 + 1.5, abs=0.15)  # half way through the nudge
+    assert abs(y[-1] - y[0]) < 0.01  # back in its lane
+
+
+def test_a_speed_step_brakes_at_its_rate():
+    ex = execute(highway(npc("hw0_1", 80.0, 25.0, Maneuver(time=2.0, action="speed", value=5.0, rate=7.0))),
+                 oracles=[], stop_on_misbehavior=False)
+    t, _, _, v = track(ex)
+    braking = (t > 2.2) & (v > 6.0) & (v < 24.0)
+    decel = -np.diff(v)[braking[1:]] / ex.trace.step_length
+    assert np.median(decel) == pytest.approx(7.0, abs=0.3)
+    assert v[-1] == pytest.approx(5.0, abs=0.1)
+
+
+def test_a_gap_trigger_fires_when_the_npc_is_that_far_ahead_of_the_ego():
+    # a faster car starts behind the ego on the next lane and cuts in once its rear is 12 m ahead of the ego
+    steps = Maneuver(time=0.0, action="lane_right", value=2.0, trigger=Trigger.GAP, at=12.0)
+    ex = execute(highway(npc("hw0_2", 5.0, 33.0, steps)), oracles=[], stop_on_misbehavior=False)
+    t, x, y, _ = track(ex)
+    start = int(np.argmax(y < y[0] - 0.01))
+    assert start > 0, "it never changed lanes"
+    f = ex.trace.actors.frame[ex.trace.actors.actor == 0][start]
+    gap = (x[start] - 2.5) - (ex.trace["x"][f] + 2.3)  # its rear bumper minus the ego's front (both along +x)
+    assert gap == pytest.approx(12.0, abs=1.5)  # one step earlier, plus the start of the move
+
+
+def test_a_headway_trigger_scales_with_the_egos_speed():
+    steps = Maneuver(time=0.0, action="lane_left", value=2.0, trigger=Trigger.HEADWAY, at=1.5)
+    ex = execute(highway(npc("hw0_0", 120.0, 12.0, steps), time_limit=25.0), oracles=[], stop_on_misbehavior=False)
+    t, x, y, _ = track(ex)
+    start = int(np.argmax(y > y[0] + 0.01))
+    assert start > 0, "it never changed lanes"
+    f = ex.trace.actors.frame[ex.trace.actors.actor == 0][start]
+    gap = (x[start] - 2.5) - (ex.trace["x"][f] + 2.3)
+    assert gap / ex.trace["speed"][f] == pytest.approx(1.5, abs=0.15)
+
+
+def test_programs_are_placed_fairly_on_every_highway_seed():
+    seeds = [load_scenario(p) for p in list_seeds(ROOT / "seeds" / "highway")]
+    mut = Mutator(load_roadmap(NET))
+    rng = random.Random(0)
+    for sc in seeds:
+        for program in PROGRAMS:
+            m = add_situation(mut, sc, program, rng)
+            assert m.scenario is not sc, f"{program.name} on {sc.name}: {m.description}"
+            for a in m.scenario.actors:
+                rest = m.scenario.model_copy(update={"actors": tuple(b for b in m.scenario.actors if b is not a)})
+                assert unfair(mut, rest, a) is None
+                assert a.maneuvers and all(st.trigger is not Trigger.TIME or st.action.value == "speed"
+                                           for st in a.maneuvers)
+
+
+def test_a_cut_in_closer_than_a_careful_driver_can_handle_is_unfair():
+    mut = Mutator(load_roadmap(NET))
+    sc = highway()
+    need = cut_in_gap(33.33 - 20.0, 2.0)
+    ok = npc("hw0_2", 150.0, 20.0, Maneuver(time=0.0, action="lane_right", value=2.0, trigger=Trigger.GAP,
+                                            at=round(need + 1.0, 1)))
+    close = ok.model_copy(update={"maneuvers": (ok.maneuvers[0].model_copy(update={"at": need - 1.0}),)})
+    assert unfair(mut, sc, ok) is None
+    assert "needs" in unfair(mut, sc, close)
+    clock = ok.model_copy(update={"maneuvers": (Maneuver(time=1.0, action="speed", value=20.0),
+                                                Maneuver(time=1.0, action="lane_right", value=2.0,
+                                                         trigger=Trigger.AFTER))})
+    assert "timed by the step before" in unfair(mut, sc, clock)
+
+
+def test_the_maneuver_strategy_builds_programs_and_their_mutations_stay_fair():
+    seeds = [load_scenario(p) for p in list_seeds(ROOT / "seeds" / "highway")]
+    mut = Mutator(load_roadmap(NET))
+    rng = random.Random(5)
+    seen = set()
+    for k in range(40):
+        sc = seeds[k % len(seeds)]
+        m = mut.generate(sc, "maneuver", rng)
+        seen.add(m.description.split(":")[0])
+        new = m.scenario
+        for _ in range(5):
+            new = mut.mutate(new, rng).scenario
+        for a in new.actors:
+            rest = new.model_copy(update={"actors": tuple(b for b in new.actors if b is not a)})
+            assert unfair(mut, rest, a) is None, a
+    assert len(seen) >= 5  # several programs, not one
