@@ -314,8 +314,11 @@ class SeedJob:
                 t0 = time.perf_counter()
                 filed = store.triage(scenario, list(ex.misbehaviors), ex.trace, key, ex.termination.value)
                 timings["triage"] = time.perf_counter() - t0
+                # every hit's scenario is kept (its folder only has the first one's): a signature's later hits
+                # can be read, replayed and compared too
                 rec.update(verdict=f"{m.oracle}/{m.kind}", signature=filed.signature, fault=filed.fault,
-                           triage_execs=filed.executions, **{"incident" if filed.fault == "other" else "finding": filed.rel})
+                           triage_execs=filed.executions, scenario=self._corpus_ref(scenario),
+                           **{"incident" if filed.fault == "other" else "finding": filed.rel})
         else:  # the simulator crashed or hung, or a plugin raised: a finding of its own kind
             m = Misbehavior(oracle=out.status, kind=out.error_type or out.status, frame=-1, time=0.0,
                             position=(0.0, 0.0), details={"detail": out.detail})

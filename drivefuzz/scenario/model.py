@@ -70,8 +70,10 @@ class ManeuverAction(str, Enum):
 class Trigger(str, Enum):
     """When a step of a maneuver program fires. Steps fire in order: a step is considered only once the
     one before it has fired. ``GAP`` and ``HEADWAY`` time the step against the ego, so that the situation
-    survives a change of the ego's speed; they fire when the measure crosses ``at`` (or at their first look
-    if it is already within 0.5 m or 0.05 s of it), and not before ``time`` s after the actor departed."""
+    survives a change of the ego's speed, and not before ``time`` s after the actor departed. A lane change
+    or nudge fires when the measure crosses ``at`` (or at its first look if it is already within 0.5 m or
+    0.05 s of it): never nearer than ``at`` to the ego. A speed step fires once the actor is ahead of the ego
+    and the measure is ``at`` or less (the ego has closed in)."""
 
     TIME = "time"  # ``time`` s after the actor departed
     AFTER = "after"  # ``time`` s after the step before fired (after departing, for the first step)
@@ -81,6 +83,18 @@ class Trigger(str, Enum):
 
 #: [m] how far an aborted lane change may reach sideways (a lane is about 3.5 m wide)
 MAX_NUDGE = 2.5
+#: A careful driver's reaction [s] and firm braking [m/s^2] on a dry road, and the room [m] left over when it
+#: has braked for a vehicle that cut in: the yardstick of every fairness rule (search/fairness.py).
+CAREFUL_REACTION, CAREFUL_DECEL, CUT_IN_MARGIN = 0.75, 5.0, 5.0
+
+
+def cut_in_gap(closing: float, duration: float) -> float:
+    """[m] the least gap ahead of the ego at which a vehicle closing at ``closing`` [m/s] may start a lane
+    change (or nudge) of ``duration`` [s] into the ego's lane: it is in the lane after a third of the change,
+    a careful driver reacts then and brakes, with :data:`CUT_IN_MARGIN` to spare. The mutator places programs
+    by it, and the executor holds back a forced lane change that would start with less."""
+    closing = max(closing, 0.0)
+    return closing * (duration / 3.0 + CAREFUL_REACTION) + closing * closing / (2.0 * CAREFUL_DECEL) + CUT_IN_MARGIN
 
 
 class Maneuver(_Model):

@@ -12,7 +12,8 @@ no driver could get out of. After every placement, position, timing or speed cha
   while the ego can still stop before it (careful braking ``EGO_DECEL`` after ``REACTION``);
 - **cut-ins leave room**: a maneuver program's lane change or nudge is triggered by the gap or the headway to
   the ego (or by the clock, with SUMO's own safety gaps), and its gap leaves a careful driver room to react to
-  the closing speed and brake (:func:`drivefuzz.search.programs.cut_in_gap`); a program's vehicle that starts
+  the closing speed and brake (:func:`drivefuzz.scenario.model.cut_in_gap`; the executor holds back a
+  lane change whose real closing speed needs more); a program's vehicle that starts
   on a lane beside the ego's is not a follower of the ego, and one that appears ahead of it later needs room
   only for the speed the ego must shed, not for a full stop;
 - **obstacles are not at the start**: an immobile actor stands at least ``MutationConfig.immobile_min_range``
@@ -34,20 +35,19 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from drivefuzz.scenario import Actor, ActorKind, ManeuverAction, NavType, Scenario, Trigger
-from drivefuzz.scenario.model import EGO_LENGTH
+from drivefuzz.scenario.model import CAREFUL_DECEL, CAREFUL_REACTION, EGO_LENGTH, cut_in_gap
 from drivefuzz.scenario.roadmap import PASSENGER
 
 if TYPE_CHECKING:  # pragma: no cover
     from drivefuzz.search.mutate import Mutator
 
 NPC_DECEL = 4.5  # [m/s^2] SUMO's default comfortable deceleration of a passenger car
-EGO_DECEL = 5.0  # [m/s^2] a careful driver's firm braking on a dry road
-REACTION = 0.75  # [s] a careful driver's reaction time
+EGO_DECEL = CAREFUL_DECEL  # [m/s^2] a careful driver's firm braking on a dry road
+REACTION = CAREFUL_REACTION  # [s] a careful driver's reaction time
 MARGIN = 2.0  # [m] left over after a stop
 VEHICLE_LENGTH = 5.0  # [m] SUMO's default passenger car
 MERGE_ROOM = 20.0  # [m] past an obstacle, to merge back into the only lane that leads on
 JUNCTION_EXIT = 15.0  # [m] the first metres of an edge after a junction: no obstacle there
-CUT_IN_MARGIN = 5.0  # [m] left over when a careful driver has braked for a vehicle that cut in
 
 
 def stopping_distance(speed: float, decel: float, reaction: float = 0.0) -> float:
@@ -137,8 +137,6 @@ def _program_unfair(mut: "Mutator", actor: Actor) -> str | None:
     """A lane change or nudge timed against the ego must leave the room of :func:`cut_in_gap`; one timed by
     the clock keeps SUMO's own safety gaps (sim/world.py), and one timed after a step before it is not
     allowed (nothing would keep its gap)."""
-    from drivefuzz.search.programs import cut_in_gap
-
     limit = lane_limit(mut, actor.start_lane)
     closing = limit - actor.speed  # the ego at the limit: the most it closes in
     for k, m in enumerate(actor.maneuvers):

@@ -20,7 +20,7 @@ The programs, and the crash type of AV-Fuzzer (ISSRE 2020) each aims at:
 
 **Fair by construction.** A step that moves a vehicle in front of the ego is triggered by the gap or
 headway to the ego, never by the clock, and its ``at`` leaves a careful driver room for the closing speed
-(:func:`cut_in_gap`); :func:`drivefuzz.search.fairness.unfair` checks it again after every mutation.
+(:func:`~drivefuzz.scenario.model.cut_in_gap`); :func:`drivefuzz.search.fairness.unfair` checks it again after every mutation.
 """
 
 from __future__ import annotations
@@ -30,7 +30,8 @@ import random
 from drivefuzz.scenario import Actor, ActorKind, Maneuver, ManeuverAction, NavType, Scenario, Trigger
 from drivefuzz.scenario.roadmap import PASSENGER
 from drivefuzz.search.catalogue import Situation, _dest, _route_spot
-from drivefuzz.search.fairness import CUT_IN_MARGIN, EGO_DECEL, REACTION, lane_limit
+from drivefuzz.scenario.model import cut_in_gap
+from drivefuzz.search.fairness import lane_limit
 from drivefuzz.search.mutate import Mutator
 
 #: NPC speeds as a share of their lane's limit (a 33 m/s motorway: 20-40 m/s)
@@ -39,14 +40,6 @@ SPEED_SHARE = (0.6, 1.2)
 LANE_CHANGE_S = (1.5, 3.5)
 #: [m/s^2] how hard a braking NPC brakes (a car's limit on a dry road is about 9)
 BRAKE_RATE = (3.0, 8.0)
-
-
-def cut_in_gap(closing: float, duration: float) -> float:
-    """[m] the least gap ahead of the ego at which a vehicle that closes at ``closing`` [m/s] may start a
-    lane change of ``duration`` [s] into the ego's lane: it is in the lane after a third of the change,
-    the careful driver reacts then and brakes at ``EGO_DECEL``, with ``CUT_IN_MARGIN`` to spare."""
-    closing = max(closing, 0.0)
-    return closing * (duration / 3.0 + REACTION) + closing * closing / (2.0 * EGO_DECEL) + CUT_IN_MARGIN
 
 
 def _beside(mut: Mutator, lane_id: str) -> list:
@@ -67,12 +60,29 @@ def _speed(mut: Mutator, lane_id: str, rng: random.Random, lo: float, hi: float)
     return round(lane_limit(mut, lane_id) * rng.uniform(lo, hi), 2)
 
 
+def _leader_speed(mut: Mutator, lane_id: str, rng: random.Random, lo: float, hi: float, v_ego: float) -> float:
+    """A vehicle ahead: ``lo``..``hi`` of the lane's limit, but slower than the ego is expected to drive
+    there (half to 0.95 of it), or the ego never catches up (a short mission from a standstill)."""
+    return round(max(min(lane_limit(mut, lane_id) * rng.uniform(lo, hi), v_ego * rng.uniform(0.5, 0.95)), 2.0), 2)
+
+
+def _ego_speed(mut: Mutator, sc: Scenario, dist: float) -> float:
+    """[m/s] the ego's expected speed ``dist`` m along its route (the mutator's profile of the empty road)."""
+    s, t = mut._ego_profile(sc)
+    j = min(max(int(dist), 0), len(s) - 2)
+    return float((s[j + 1] - s[j]) / max(t[j + 1] - t[j], 1e-6))
+
+
 def _place(mut: Mutator, sc: Scenario, rng: random.Random, lo: float, hi: float, rel: float,
            own_lane: bool = False):
     """Where and when a program's vehicle starts: a spot ``lo``..``hi`` m along the ego's route, on the
     ego's lane (``own_lane``) or a lane beside it, departing when the ego's front is expected ``rel`` m
     past the spot (negative: still before it). Returns (the ego's lane there, the vehicle's lane, position
     [m], departure [s], the ego's expected speed there [m/s]) or None."""
+    goal = mut.rmap.route_length(mut._route(sc), sc.mission.start_pos, sc.mission.goal_pos)
+    hi = min(hi, 0.7 * goal)  # where the ego still has road left to meet it
+    if hi <= lo:
+        return None
     d = rng.uniform(lo, hi)
     spot = _route_spot(mut, sc, d)
     if spot is None:
@@ -87,7 +97,7 @@ def _place(mut: Mutator, sc: Scenario, rng: random.Random, lo: float, hi: float,
         lane = rng.choice(beside)
     pos = round(min(pos, lane.getLength() - 0.5), 2)
     depart = round(max(mut._ego_eta(sc, max(d + rel, 0.0)), 0.0), 1) if d + rel > 0 else 0.0
-    return ego_lane, lane, pos, depart, lane_limit(mut, ego_lane)
+    return ego_lane, lane, pos, depart, max(_ego_speed(mut, sc, d), 1.0)
 
 
 def _vehicle(mut: Mutator, sc: Scenario, lane, pos: float, speed: float, depart: float, steps, taken=()) -> Actor:
@@ -111,8 +121,8 @@ def overtake_cut_in(mut, sc, rng):
     desc = f"overtakes from {lane.getID()} at {speed:.1f} m/s and cuts in {at} m ahead ({duration} s)"
     if rng.random() < 0.5:
         slow = round(v_ego * rng.uniform(0.3, 0.7), 2)
-        rate = round(rng.uniform(2.0, 4.5), 1)  # no harder than SUMO's comfortable braking
-        after = round(duration + rng.uniform(2.0, 5.0), 1)  # the ego has had time to drop back
+        rate = round(rng.uniform(*BRAKE_RATE), 1)
+        after = round(duration + rng.uniform(2.5, 5.0), 1)  # the ego has had time to drop back
         steps.append(Maneuver(time=after, action=ManeuverAction.SPEED, value=slow, trigger=Trigger.AFTER,
                               rate=rate))
         desc += f", brakes at {rate} m/s^2 to {slow:.1f} m/s {after} s later"
@@ -126,20 +136,21 @@ def beside(mut, sc, rng):
     if placed is None:
         return None
     ego_lane, lane, pos, depart, v_ego = placed
-    speed = _speed(mut, lane.getID(), rng, 0.85, 1.05)
+    speed = round(min(v_ego * rng.uniform(0.9, 1.1), 1.2 * lane_limit(mut, lane.getID())), 2)
     a = _vehicle(mut, sc, lane, pos, speed, depart, [Maneuver(time=0.0, action=ManeuverAction.SPEED, value=speed)])
     return [a], [], {}, f"{a.id} rides beside the ego on {lane.getID()} at {speed:.1f} m/s"
 
 
 def cut_in(mut, sc, rng):
     """Ahead on the lane beside, slower than the ego, cuts in when the ego is ``at`` s behind it."""
-    placed = _place(mut, sc, rng, 30.0, 200.0, rel=-rng.uniform(30.0, 80.0))
+    placed = _place(mut, sc, rng, 25.0, 200.0, rel=-rng.uniform(15.0, 40.0))
     if placed is None:
         return None
     ego_lane, lane, pos, depart, v_ego = placed
-    speed = _speed(mut, lane.getID(), rng, SPEED_SHARE[0], 0.95)
+    speed = _leader_speed(mut, lane.getID(), rng, SPEED_SHARE[0], 0.95, v_ego)
     duration = round(rng.uniform(*LANE_CHANGE_S), 2)
-    low = cut_in_gap(v_ego - speed, duration) / v_ego
+    limit = lane_limit(mut, ego_lane)  # the fairness rule's worst case: the ego at the limit
+    low = cut_in_gap(limit - speed, duration) / limit
     at = round(rng.uniform(low, low + 1.5), 2)
     change, _ = _toward(lane, mut.rmap.lane(ego_lane))
     a = _vehicle(mut, sc, lane, pos, speed, depart,
@@ -149,11 +160,11 @@ def cut_in(mut, sc, rng):
 
 def brake_check(mut, sc, rng):
     """Ahead on the ego's lane, brakes hard when the ego is within ``at`` s, then drives on."""
-    placed = _place(mut, sc, rng, 30.0, 200.0, rel=-rng.uniform(30.0, 80.0), own_lane=True)
+    placed = _place(mut, sc, rng, 25.0, 200.0, rel=-rng.uniform(15.0, 40.0), own_lane=True)
     if placed is None:
         return None
     ego_lane, lane, pos, depart, v_ego = placed
-    speed = _speed(mut, lane.getID(), rng, 0.7, 1.0)
+    speed = _leader_speed(mut, lane.getID(), rng, 0.7, 1.0, v_ego)
     at = round(rng.uniform(0.6, 2.5), 2)
     rate = round(rng.uniform(*BRAKE_RATE), 1)
     slow = round(speed * rng.uniform(0.0, 0.5), 2)
@@ -167,12 +178,12 @@ def brake_check(mut, sc, rng):
 
 def slow_ahead(mut, sc, rng):
     """Ahead on the ego's lane, slows down for good (to 0.2-0.6 of the limit) when the ego comes near."""
-    placed = _place(mut, sc, rng, 30.0, 200.0, rel=-rng.uniform(40.0, 100.0), own_lane=True)
+    placed = _place(mut, sc, rng, 25.0, 200.0, rel=-rng.uniform(20.0, 60.0), own_lane=True)
     if placed is None:
         return None
     ego_lane, lane, pos, depart, v_ego = placed
-    speed = _speed(mut, lane.getID(), rng, SPEED_SHARE[0], 1.0)
-    slow = _speed(mut, lane.getID(), rng, 0.2, 0.6)
+    speed = _leader_speed(mut, lane.getID(), rng, SPEED_SHARE[0], 1.0, v_ego)
+    slow = round(speed * rng.uniform(0.2, 0.6), 2)
     at = round(rng.uniform(1.0, 4.0), 2)
     rate = round(rng.uniform(1.0, 3.0), 1)
     a = _vehicle(mut, sc, lane, pos, speed, depart, [
@@ -182,14 +193,14 @@ def slow_ahead(mut, sc, rng):
 
 def aborted_lane_change(mut, sc, rng):
     """Ahead on the lane beside, starts changing into the ego's lane and turns back."""
-    placed = _place(mut, sc, rng, 20.0, 200.0, rel=-rng.uniform(20.0, 60.0))
+    placed = _place(mut, sc, rng, 20.0, 200.0, rel=-rng.uniform(15.0, 40.0))
     if placed is None:
         return None
     ego_lane, lane, pos, depart, v_ego = placed
-    speed = _speed(mut, lane.getID(), rng, 0.7, 1.0)
+    speed = _leader_speed(mut, lane.getID(), rng, 0.7, 1.0, v_ego)
     duration = round(rng.uniform(2.0, 4.0), 2)
     depth = round(rng.uniform(1.0, 2.5), 2)
-    at = round(cut_in_gap(v_ego - speed, duration) + rng.uniform(0.0, 15.0), 1)
+    at = round(cut_in_gap(lane_limit(mut, ego_lane) - speed, duration) + rng.uniform(0.0, 15.0), 1)
     _, nudge = _toward(lane, mut.rmap.lane(ego_lane))
     a = _vehicle(mut, sc, lane, pos, speed, depart, [
         Maneuver(time=0.5, action=nudge, value=duration, trigger=Trigger.GAP, at=at, depth=depth)])
@@ -204,9 +215,9 @@ def squeeze(mut, sc, rng):
     ego_lane, lane, pos, depart, v_ego = placed
     ego = mut.rmap.lane(ego_lane)
     sides = _beside(mut, ego_lane)
-    speed = _speed(mut, lane.getID(), rng, 0.8, 1.0)
+    speed = _leader_speed(mut, lane.getID(), rng, 0.8, 1.0, v_ego)
     duration = round(rng.uniform(2.0, 4.0), 2)
-    at = round(cut_in_gap(v_ego - speed, duration) + rng.uniform(0.0, 8.0), 1)
+    at = round(cut_in_gap(lane_limit(mut, ego_lane) - speed, duration) + rng.uniform(0.0, 8.0), 1)
     _, nudge = _toward(lane, ego)
     first = _vehicle(mut, sc, lane, pos, speed, depart, [
         Maneuver(time=0.5, action=nudge, value=duration, trigger=Trigger.GAP, at=at,

@@ -16,6 +16,7 @@ import numpy as np
 from drivefuzz.ads import OBSERVATION_RADIUS, ObjectState
 from drivefuzz.oracle import Obstacle
 from drivefuzz.scenario import ActorKind, Maneuver, ManeuverAction, NavType, Scenario, Trigger
+from drivefuzz.scenario.model import cut_in_gap
 from drivefuzz.sim.trace import Recorder
 
 #: POI/polygon types the collision oracle treats as solid (a user's polygon file may use them).
@@ -109,6 +110,8 @@ class ActorDriver:
             elif a.nav is NavType.MANEUVER:
                 sim.vehicle.setMaxSpeed(actor_id, max(a.speed, 0.1))
                 sim.vehicle.setSpeedFactor(actor_id, MANEUVER_SPEED_FACTOR)
+                if sim.vehicle.getSpeed(actor_id) > a.speed:  # SUMO inserted it at the lane's limit: it enters at its own
+                    sim.vehicle.setPreviousSpeed(actor_id, a.speed)
                 sim.vehicle.setLaneChangeMode(actor_id, 512)
                 self.programs[actor_id] = _Program(fired=t)
         elif a.nav in (NavType.IMMOBILE, NavType.LINEAR):
@@ -183,10 +186,17 @@ class ActorDriver:
             return False
         gap = ch * dx + sh * dy - 0.5 * length - half
         value, tol = (gap, GAP_TOLERANCE) if m.trigger is Trigger.GAP else (gap / max(speed, 1.0), HEADWAY_TOLERANCE)
+        if m.action is ManeuverAction.SPEED:  # ahead of the ego, and the ego at ``at`` or nearer
+            return gap > 0.0 and value <= m.at
         above = value > m.at
         crossed = p.above is not None and above != p.above
         p.above = above
-        return crossed or abs(value - m.at) <= tol
+        if not (crossed or abs(value - m.at) <= tol):
+            return False
+        # fair by construction: never into less room than a careful driver needs at the real closing speed
+        # (the NPC may be slower than its program says: stopped at the end of a merge lane, in a queue)
+        closing = speed - self.sim.vehicle.getSpeed(vid) * math.cos(h - math.atan2(sh, ch))
+        return gap >= cut_in_gap(closing, max(m.value, self.dt))
 
     def _start(self, vid: str, m: Maneuver, p: _Program, t: float) -> None:
         sim = self.sim

@@ -1,0 +1,97 @@
+"""AV-Fuzzer's five crash types (Li et al., ISSRE 2020), read from a trace: who changed lanes, and where
+the other vehicle was before the contact.
+
+1. ``overtake_cut_in``: the other vehicle came from behind the ego on a lane beside it and cut in;
+2. ``ego_cut_in``: the ego changed lanes into the other;
+3. ``cut_in``: the other vehicle, ahead of the ego on a lane beside it all along, cut in;
+4. ``rear_end_braking``: the ego ran into the back of a vehicle braking ahead of it on its lane;
+5. ``squeeze``: two vehicles closed in on the ego at once (a second one within :data:`SQUEEZE_GAP` of it).
+
+Anything else is ``other`` (the ego hit from behind, a vehicle that slowed long before, a crossing). Used by
+``tools/eval_maneuver.py``; works on a frozen :class:`~drivefuzz.sim.trace.Trace` only.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from drivefuzz.triage.evidence import frames_before, lane_changed
+
+CRASH_TYPES = ("overtake_cut_in", "ego_cut_in", "cut_in", "rear_end_braking", "squeeze")
+#: [s] of trace before the contact that the classification reads
+WINDOW = 6.0
+#: [m] sideways from the ego's centre line beyond which a vehicle is on a lane beside it (lanes ~3.5 m)
+BESIDE = 2.2
+#: [m] sideways movement that makes a lane change (or its start)
+MOVED = 1.0
+#: [m] body gap (about: centre distances less half the bodies) of a second vehicle that squeezes the ego
+SQUEEZE_GAP = 1.5
+#: [m/s] speed lost within the window that makes the vehicle ahead a braking one
+BRAKED = 2.0
+
+
+def _relative(trace, rows, frames, base_frame: int):
+    """(longitudinal, lateral) [m] of an actor's centre in the ego's frame at each of ``frames``, and its
+    sideways position [m] square to the ego's heading at ``base_frame`` (how far it moved across the road)."""
+    a = trace.actors
+    ex, ey, eh = trace["x"][frames], trace["y"][frames], trace["heading"][frames]
+    dx, dy = a.x[rows] - ex, a.y[rows] - ey
+    lon = np.cos(eh) * dx + np.sin(eh) * dy
+    lat = -np.sin(eh) * dx + np.cos(eh) * dy
+    h0 = trace["heading"][base_frame]
+    across = -np.sin(h0) * a.x[rows] + np.cos(h0) * a.y[rows]
+    return lon, lat, across
+
+
+def _window_rows(trace, index: int, w: slice):
+    a = trace.actors
+    rows = np.flatnonzero((a.actor == index) & (a.frame >= w.start) & (a.frame < w.stop))
+    return rows, a.frame[rows]
+
+
+def crash_type(trace, frame: int, other: str) -> str:
+    """The crash type (one of :data:`CRASH_TYPES`, or ``other``) of the ego's contact with vehicle ``other``
+    at ``frame``."""
+    a = trace.actors
+    if other not in a.ids:
+        return "other"
+    w = frames_before(trace, frame, WINDOW)
+    rows, frames = _window_rows(trace, a.ids.index(other), w)
+    if len(rows) < 2:
+        return "other"
+    lon, lat, across = _relative(trace, rows, frames, int(frames[0]))
+    h0 = trace["heading"][frames[0]]
+    ego_across = -np.sin(h0) * trace["x"][frames] + np.cos(h0) * trace["y"][frames]
+    ego_moved = abs(float(ego_across[-1] - ego_across[0]))
+    other_moved = abs(float(across[-1] - across[0]))
+    if _squeezed(trace, frame, other):
+        return "squeeze"
+    if lane_changed(trace, frame, WINDOW) and ego_moved >= MOVED and ego_moved > other_moved:
+        return "ego_cut_in"
+    came_from_beside = bool(np.any(np.abs(lat) > BESIDE)) and abs(float(lat[-1])) < BESIDE
+    if came_from_beside and other_moved >= MOVED:
+        return "overtake_cut_in" if bool(np.any(lon < 0.0)) else "cut_in"
+    if float(lon[-1]) > 0.0 and abs(float(lat[-1])) < BESIDE:
+        speed = a.speed[rows]
+        if float(np.max(speed)) - float(speed[-1]) >= BRAKED:
+            return "rear_end_braking"
+    return "other"
+
+
+def _squeezed(trace, frame: int, other: str) -> bool:
+    """A second vehicle (not ``other``) came within :data:`SQUEEZE_GAP` of the ego's body in the last 1.5 s."""
+    a = trace.actors
+    w = frames_before(trace, frame, 1.5)
+    half_l, half_w = 0.5 * trace.meta.get("ego_length", 4.6), 0.5 * trace.meta.get("ego_width", 1.9)
+    for j, aid in enumerate(a.ids):
+        if aid == other or a.kinds[j] != "vehicle":
+            continue
+        rows, frames = _window_rows(trace, j, w)
+        if not len(rows):
+            continue
+        lon, lat, _ = _relative(trace, rows, frames, int(frames[0]))
+        gap_lon = np.abs(lon) - half_l - 0.5 * a.length[j]
+        gap_lat = np.abs(lat) - half_w - 0.5 * a.width[j]
+        if bool(np.any(np.maximum(gap_lon, gap_lat) < SQUEEZE_GAP)):
+            return True
+    return False
