@@ -175,3 +175,51 @@ def test_the_maneuver_strategy_builds_programs_and_their_mutations_stay_fair():
             rest = new.model_copy(update={"actors": tuple(b for b in new.actors if b is not a)})
             assert unfair(mut, rest, a) is None, a
     assert len(seen) >= 5  # several programs, not one
+
+
+# ------------------------------------------------------------------ AV-Fuzzer's crash types, from traces
+def crash(sc: Scenario, fault: str):
+    from drivefuzz.triage.crashtype import crash_type
+    from oracles.collision import CollisionOracle
+
+    sc = sc.model_copy(update={"ads": sc.ads.model_copy(update={"options": {"fault": fault}})})
+    ex = execute(sc, oracles=[CollisionOracle()])
+    assert ex.misbehaviors, "no collision"
+    m = ex.misbehaviors[0]  # (a squeeze may touch both cars in one frame)
+    return crash_type(ex.trace, m.frame, m.actors[0]), m.actors[0]
+
+
+def test_crash_type_rear_end_of_a_braking_npc():
+    # a leader 40 m ahead brakes hard at 3 s; an ego that brakes late runs into it
+    leader = npc("hw0_1", 70.0, 20.0, Maneuver(time=3.0, action="speed", value=0.0, rate=8.0))
+    assert crash(highway(leader), "late_braking") == ("rear_end_braking", "v0")
+
+
+def test_crash_type_npc_cuts_in_from_ahead():
+    # slower, ahead on the next lane: cuts in 40 m ahead of an ego that does not react (no control)
+    cutter = npc("hw0_0", 80.0, 8.0, Maneuver(time=0.0, action="lane_left", value=2.0, trigger=Trigger.GAP, at=40.0))
+    assert crash(highway(cutter), "no_control") == ("cut_in", "v0")
+
+
+def test_crash_type_npc_overtakes_and_cuts_in():
+    # from behind on the next lane, faster: cuts in 6 m ahead, then brakes in front of the coasting ego
+    overtaker = npc("hw0_2", 5.0, 30.0,
+                    Maneuver(time=0.0, action="lane_right", value=1.5, trigger=Trigger.GAP, at=6.0),
+                    Maneuver(time=1.5, action="speed", value=0.0, trigger=Trigger.AFTER, rate=8.0))
+    assert crash(highway(overtaker), "no_control") == ("overtake_cut_in", "v0")
+
+
+def test_crash_type_ego_cuts_in():
+    # a car rides beside the ego on the left; the ego's steering is forced left (fault) into it
+    rider = npc("hw0_2", 22.0, 21.0, Maneuver(time=0.0, action="speed", value=21.0))
+    assert crash(highway(rider), "steer_left") == ("ego_cut_in", "v0")
+
+
+def test_crash_type_squeeze():
+    # two cars ahead on both sides swerve into the lane of an ego that does not react
+    left = npc("hw0_2", 55.0, 17.0, Maneuver(time=0.0, action="nudge_right", value=8.0, depth=2.2,
+                                             trigger=Trigger.GAP, at=15.0))
+    right = Actor(**{**npc("hw0_0", 55.0, 17.0, Maneuver(time=0.0, action="nudge_left", value=8.0, depth=2.2,
+                                                         trigger=Trigger.GAP, at=15.0)).model_dump(), "id": "v1"})
+    kind, _ = crash(highway(left, right), "no_control")
+    assert kind == "squeeze"

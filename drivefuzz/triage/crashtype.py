@@ -15,17 +15,21 @@ from __future__ import annotations
 
 import numpy as np
 
-from drivefuzz.triage.evidence import frames_before, lane_changed
+from drivefuzz.triage.evidence import frames_before
 
 CRASH_TYPES = ("overtake_cut_in", "ego_cut_in", "cut_in", "rear_end_braking", "squeeze")
 #: [s] of trace before the contact that the classification reads
-WINDOW = 6.0
+WINDOW = 10.0
 #: [m] sideways from the ego's centre line beyond which a vehicle is on a lane beside it (lanes ~3.5 m)
 BESIDE = 2.2
-#: [m] sideways movement that makes a lane change (or its start)
+#: [m] sideways movement of the other vehicle that makes a lane change (or its start)
 MOVED = 1.0
+#: [m] sideways movement of the ego towards the other that makes the ego's cut-in (contact comes early in it)
+EGO_MOVED = 0.5
+#: [s] before the contact over which the sideways movements are compared
+MOVE_WINDOW = 3.0
 #: [m] body gap (about: centre distances less half the bodies) of a second vehicle that squeezes the ego
-SQUEEZE_GAP = 1.5
+SQUEEZE_GAP = 2.0
 #: [m/s] speed lost within the window that makes the vehicle ahead a braking one
 BRAKED = 2.0
 
@@ -59,17 +63,21 @@ def crash_type(trace, frame: int, other: str) -> str:
     rows, frames = _window_rows(trace, a.ids.index(other), w)
     if len(rows) < 2:
         return "other"
-    lon, lat, across = _relative(trace, rows, frames, int(frames[0]))
-    h0 = trace["heading"][frames[0]]
-    ego_across = -np.sin(h0) * trace["x"][frames] + np.cos(h0) * trace["y"][frames]
-    ego_moved = abs(float(ego_across[-1] - ego_across[0]))
-    other_moved = abs(float(across[-1] - across[0]))
+    lon, lat, across_all = _relative(trace, rows, frames, int(frames[0]))
+    # who moved sideways, over the last MOVE_WINDOW s, square to the ego's heading then (straight roads)
+    recent = frames >= frames_before(trace, frame, MOVE_WINDOW).start
+    _, _, across = _relative(trace, rows[recent], frames[recent], int(frames[recent][0]))
+    h0 = trace["heading"][frames[recent][0]]
+    ego_across = -np.sin(h0) * trace["x"][frames[recent]] + np.cos(h0) * trace["y"][frames[recent]]
+    ego_moved = float(ego_across[-1] - ego_across[0])
+    other_moved = float(across[-1] - across[0])
+    side = float(np.sign(lat[recent][0]))  # where the other was: + left of the ego, - right
     if _squeezed(trace, frame, other):
         return "squeeze"
-    if lane_changed(trace, frame, WINDOW) and ego_moved >= MOVED and ego_moved > other_moved:
-        return "ego_cut_in"
+    if side * ego_moved >= EGO_MOVED and side * ego_moved > -side * other_moved:
+        return "ego_cut_in"  # the ego moved towards the other more than the other towards it
     came_from_beside = bool(np.any(np.abs(lat) > BESIDE)) and abs(float(lat[-1])) < BESIDE
-    if came_from_beside and other_moved >= MOVED:
+    if came_from_beside and abs(float(across_all[-1] - across_all[0])) >= MOVED:
         return "overtake_cut_in" if bool(np.any(lon < 0.0)) else "cut_in"
     if float(lon[-1]) > 0.0 and abs(float(lat[-1])) < BESIDE:
         speed = a.speed[rows]
