@@ -333,15 +333,16 @@ class _Run:
             return False
         self.others = others = vids[:k_ego] + vids[k_ego + 1:]
         self.pids = pids = sim.person.getIDList()
-        if (others, pids) != actors.key:  # someone departed or arrived: start what departed
-            on_depart = self.driver.on_depart
-            for aid in chain(others, pids):
-                on_depart(aid, t)
         if self.sumo_driven:
             self.ego_from_sumo()
         self.state = state = self.physics.state
         self.ex, self.ey = ex, ey = state.x, state.y
         self.ch, self.sh = ch, sh = math.cos(state.heading), math.sin(state.heading)
+        if (others, pids) != actors.key:  # someone departed or arrived: start what departed
+            on_depart, ego = self.driver.on_depart, (ex, ey, ch, sh, state.speed, half_len)
+            for aid in chain(others, pids):
+                if not on_depart(aid, t, ego):  # removed again (it appeared where no driver could react)
+                    self.others = others = tuple(v for v in others if v != aid)
         self.front = (ex + half_len * ch, ey + half_len * sh)
         self.lane = lane = v_get.getLaneID(EGO_ID)
         self.edge = edge = v_get.getRoadID(EGO_ID)

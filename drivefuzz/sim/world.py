@@ -16,7 +16,7 @@ import numpy as np
 from drivefuzz.ads import OBSERVATION_RADIUS, ObjectState
 from drivefuzz.oracle import Obstacle
 from drivefuzz.scenario import ActorKind, Maneuver, ManeuverAction, NavType, Scenario, Trigger
-from drivefuzz.scenario.model import cut_in_gap
+from drivefuzz.scenario.model import CAREFUL_DECEL, CAREFUL_REACTION, cut_in_gap
 from drivefuzz.sim.trace import Recorder
 
 #: POI/polygon types the collision oracle treats as solid (a user's polygon file may use them).
@@ -59,6 +59,8 @@ MANEUVER_SPEED_FACTOR = 1.3
 GAP_TOLERANCE, HEADWAY_TOLERANCE = 0.5, 0.05
 #: [m] gap and headway triggers fire only while the actor is at most this far to the side of the ego
 TRIGGER_LATERAL = 10.0
+#: [m] sideways, and [m] left over: a program's vehicle that appears on the ego's path must leave this
+POP_UP_LATERAL, POP_UP_MARGIN = 2.5, 2.0
 #: [m/s^2] SUMO's default deceleration and acceleration of a passenger car (a program may ask for more)
 SUMO_DECEL, SUMO_ACCEL = 4.5, 2.6
 
@@ -94,12 +96,18 @@ class ActorDriver:
         self.walkers: dict[str, list[float]] = {}
         self.dt = scenario.sim.step_length
 
-    def on_depart(self, actor_id: str, t: float) -> None:
+    def on_depart(self, actor_id: str, t: float, ego=None) -> bool:
+        """Start what ``actor_id`` does, in the frame it appeared; False when it was removed instead: a
+        program's vehicle that appeared where a careful ego could not react (see :meth:`_pops_up`).
+        ``ego``: as for :meth:`step`."""
         a = self.spec.get(actor_id)
         if a is None or actor_id in self.started:
-            return
+            return True
         self.started.add(actor_id)
         sim = self.sim
+        if a.nav is NavType.MANEUVER and ego is not None and self._pops_up(actor_id, a, ego):
+            sim.vehicle.remove(actor_id)
+            return False
         if a.kind is ActorKind.VEHICLE:
             if a.nav is NavType.LINEAR:
                 sim.vehicle.setSpeedMode(actor_id, 0)
@@ -128,6 +136,26 @@ class ActorDriver:
             sim.person.moveToXY(actor_id, "", x, y, (90.0 - math.degrees(math.atan2(uy, ux))) % 360.0, 2)
         elif a.nav is NavType.AUTOPILOT:
             sim.person.setSpeed(actor_id, max(a.speed, 0.05))
+        return True
+
+    def _pops_up(self, vid: str, a, ego) -> bool:
+        """Whether a program's vehicle appeared on or across the ego's path (within 2.5 m to its side) nearer
+        than a careful driver needs to shed the speed difference, or overlapping the ego. The mutator times
+        departures with its profile of how the reference ADS drives; another ADS (or a mutant) is elsewhere."""
+        ex, ey, ch, sh, speed, half = ego
+        fx, fy = self.sim.vehicle.getPosition(vid)
+        h = math.radians(90.0 - self.sim.vehicle.getAngle(vid))
+        length = self.sim.vehicle.getLength(vid)
+        dx, dy = fx - 0.5 * length * math.cos(h) - ex, fy - 0.5 * length * math.sin(h) - ey
+        if abs(-sh * dx + ch * dy) > POP_UP_LATERAL:
+            return False
+        lon = ch * dx + sh * dy
+        gap = lon - 0.5 * length - half
+        if gap < 0.0:
+            return lon + 0.5 * length + half > 0.0  # beside the ego's body (behind it is no pop-up)
+        shed = max(speed - a.speed, 0.0)
+        need = shed * CAREFUL_REACTION + shed * shed / (2.0 * CAREFUL_DECEL) + POP_UP_MARGIN
+        return gap < need
 
     def step(self, t: float, alive_vehicles: Sequence[str], alive_persons: Sequence[str],
              ego: tuple[float, float, float, float, float, float] | None = None) -> None:
