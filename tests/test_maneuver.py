@@ -186,7 +186,7 @@ def crash(sc: Scenario, fault: str):
     ex = execute(sc, oracles=[CollisionOracle()])
     assert ex.misbehaviors, "no collision"
     m = ex.misbehaviors[0]  # (a squeeze may touch both cars in one frame)
-    return crash_type(ex.trace, m.frame, m.actors[0]), m.actors[0]
+    return crash_type(ex.trace, m.frame, m.actors[0], load_roadmap(NET)), m.actors[0]
 
 
 def test_crash_type_rear_end_of_a_braking_npc():

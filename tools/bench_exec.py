@@ -58,13 +58,18 @@ def busy_scenario(n_veh: int = 40, n_ped: int = 10, seed: int = 1) -> Scenario:
                     actors=tuple(actors), sim=SimOptions(time_limit=60.0), seed=seed)
 
 
-def sumo_alone(sc: Scenario) -> float:
+#: SUMO's lane-change models, as options on top of drivefuzz's own (``--lanechange.duration``, continuous)
+LANE_CHANGE_MODELS = {"instant (SUMO's default)": ["--lanechange.duration", "0"],
+                      "sublane (--lateral-resolution 0.8)": ["--lanechange.duration", "0", "--lateral-resolution", "0.8"]}
+
+
+def sumo_alone(sc: Scenario, extra: list[str] = ()) -> float:
     import libsumo
 
     with tempfile.TemporaryDirectory() as d:
         write_scenario(sc, d)
         t0 = time.perf_counter()
-        libsumo.start(_sumo_args(sc, Path(d), sc.network_path(), gui=False))
+        libsumo.start(_sumo_args(sc, Path(d), sc.network_path(), gui=False) + list(extra))
         steps = int(round(sc.sim.time_limit / sc.sim.step_length))
         for _ in range(steps):
             libsumo.simulationStep()
@@ -84,7 +89,10 @@ def main() -> None:
     # interleaved, so that a burst of load from other processes hits both kinds alike; the minimum is the
     # figure least disturbed by them (no goal inside 60 s, no early stop: the full minute runs)
     full, alone, stages, full_cpu, alone_cpu = [], [], [], [], []
+    models: dict[str, list[float]] = {k: [] for k in LANE_CHANGE_MODELS}
     for _ in range(args.repeat):
+        for name, extra in LANE_CHANGE_MODELS.items():
+            models[name].append(sumo_alone(sc, extra))
         c0 = time.process_time()
         ex = execute(sc, oracles=oracles(), stop_on_misbehavior=False)
         full_cpu.append(time.process_time() - c0)
@@ -107,6 +115,9 @@ def main() -> None:
     print(f"executions per hour, 1 core {3600 / f:.0f}")
     print(f"CPU time (process): full {fc:.3f} s, SUMO alone {ac:.3f} s, ratio {fc / ac:.2f}  "
           "(less disturbed by other processes on a shared machine)")
+    print("SUMO alone under other lane-change models (drivefuzz runs SUMO's continuous one, lanechange.duration 3):")
+    for name, times in models.items():
+        print(f"  {name:<36} {min(times):.3f} s  ({min(times) / a:.2f} x the continuous model)")
     print("per stage (minimum over runs):")
     for k in stages[0]:
         print(f"  {k:<10} {min(s[k] for s in stages):.3f} s")

@@ -119,6 +119,7 @@ def _records(out: Path) -> list[dict]:
 def classify(out: Path, rec: dict, ads: dict) -> tuple[str, str]:
     """(crash type, note) of one collision record: its kept scenario replayed, the contact classified."""
     from drivefuzz.oracle import OracleSettings
+    from drivefuzz.scenario.roadmap import load_roadmap
     from drivefuzz.scenario.sumofiles import load_scenario
     from drivefuzz.sim.execute import execute
     from drivefuzz.triage.crashtype import crash_type
@@ -132,7 +133,7 @@ def classify(out: Path, rec: dict, ads: dict) -> tuple[str, str]:
         return "other", "replay: no collision"
     m = hits[0]
     other = m.actors[0] if m.actors else ""
-    return crash_type(ex.trace, m.frame, other), ""
+    return crash_type(ex.trace, m.frame, other, load_roadmap(sc.network_path())), ""
 
 
 def report(out: Path, wall_s: float | None) -> None:

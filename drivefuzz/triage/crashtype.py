@@ -8,7 +8,7 @@ the other vehicle was before the contact.
 5. ``squeeze``: two vehicles closed in on the ego at once (a second one within :data:`SQUEEZE_GAP` of it).
 
 Anything else is ``other`` (the ego hit from behind, a vehicle that slowed long before, a crossing). Used by
-``tools/eval_maneuver.py``; works on a frozen :class:`~drivefuzz.sim.trace.Trace` only.
+``tools/eval_maneuver.py``; works on a frozen :class:`~drivefuzz.sim.trace.Trace` and the road map.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ BRAKED = 2.0
 
 def _relative(trace, rows, frames, base_frame: int):
     """(longitudinal, lateral) [m] of an actor's centre in the ego's frame at each of ``frames``, and its
-    sideways position [m] square to the ego's heading at ``base_frame`` (how far it moved across the road)."""
+    sideways position [m] square to the ego's heading at ``base_frame``."""
     a = trace.actors
     ex, ey, eh = trace["x"][frames], trace["y"][frames], trace["heading"][frames]
     dx, dy = a.x[rows] - ex, a.y[rows] - ey
@@ -53,9 +53,27 @@ def _window_rows(trace, index: int, w: slice):
     return rows, a.frame[rows]
 
 
-def crash_type(trace, frame: int, other: str) -> str:
+def _road_heading(trace, rmap, frames) -> np.ndarray:
+    """[rad] the direction of the ego's lane at its place in each of ``frames`` (its own heading where the
+    trace names no lane drivefuzz knows)."""
+    out = np.array(trace["heading"][frames], dtype=float)
+    lanes, pos = trace["lane"], trace["lane_pos"]
+    for i, k in enumerate(frames):
+        lane = str(lanes[k])
+        if lane and rmap.has_lane(lane) and np.isfinite(pos[k]):
+            out[i] = rmap.geom(lane).position(float(pos[k]))[2]
+    return out
+
+
+def _sideways(speed, heading, road) -> float:
+    """[m] moved to the left of the road (negative: right): the speed's component square to it, summed."""
+    return float(np.sum(speed * np.sin(heading - road)))
+
+
+def crash_type(trace, frame: int, other: str, rmap) -> str:
     """The crash type (one of :data:`CRASH_TYPES`, or ``other``) of the ego's contact with vehicle ``other``
-    at ``frame``."""
+    at ``frame``; ``rmap`` is the network's :class:`~drivefuzz.scenario.roadmap.RoadMap` (the road's direction
+    says who moved sideways, on curved ramps too)."""
     a = trace.actors
     if other not in a.ids:
         return "other"
@@ -63,21 +81,21 @@ def crash_type(trace, frame: int, other: str) -> str:
     rows, frames = _window_rows(trace, a.ids.index(other), w)
     if len(rows) < 2:
         return "other"
-    lon, lat, across_all = _relative(trace, rows, frames, int(frames[0]))
-    # who moved sideways, over the last MOVE_WINDOW s, square to the ego's heading then (straight roads)
+    lon, lat, _ = _relative(trace, rows, frames, int(frames[0]))
+    dt = trace.step_length
+    road = _road_heading(trace, rmap, frames)
+    ego_side = _sideways(trace["speed"][frames], trace["heading"][frames], road) * dt
+    other_side = _sideways(a.speed[rows], a.heading[rows], road) * dt
     recent = frames >= frames_before(trace, frame, MOVE_WINDOW).start
-    _, _, across = _relative(trace, rows[recent], frames[recent], int(frames[recent][0]))
-    h0 = trace["heading"][frames[recent][0]]
-    ego_across = -np.sin(h0) * trace["x"][frames[recent]] + np.cos(h0) * trace["y"][frames[recent]]
-    ego_moved = float(ego_across[-1] - ego_across[0])
-    other_moved = float(across[-1] - across[0])
+    ego_recent = _sideways(trace["speed"][frames[recent]], trace["heading"][frames[recent]], road[recent]) * dt
+    other_recent = _sideways(a.speed[rows[recent]], a.heading[rows[recent]], road[recent]) * dt
     side = float(np.sign(lat[recent][0]))  # where the other was: + left of the ego, - right
     if _squeezed(trace, frame, other):
         return "squeeze"
-    if side * ego_moved >= EGO_MOVED and side * ego_moved > -side * other_moved:
+    if side * ego_recent >= EGO_MOVED and side * ego_recent > -side * other_recent:
         return "ego_cut_in"  # the ego moved towards the other more than the other towards it
     came_from_beside = bool(np.any(np.abs(lat) > BESIDE)) and abs(float(lat[-1])) < BESIDE
-    if came_from_beside and abs(float(across_all[-1] - across_all[0])) >= MOVED:
+    if came_from_beside and abs(other_side) >= MOVED and abs(other_side) > abs(ego_side):
         return "overtake_cut_in" if bool(np.any(lon < 0.0)) else "cut_in"
     if float(lon[-1]) > 0.0 and abs(float(lat[-1])) < BESIDE:
         speed = a.speed[rows]
