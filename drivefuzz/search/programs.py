@@ -108,26 +108,26 @@ def _vehicle(mut: Mutator, sc: Scenario, lane, pos: float, speed: float, depart:
 
 # ------------------------------------------------------------------------------ the programs
 def overtake_cut_in(mut, sc, rng):
-    """From behind on the lane beside, faster than the ego, cut in ``at`` m ahead; sometimes brake after."""
+    """From behind on the lane beside, faster than the ego, cut in ``at`` m ahead, then slow down below the
+    ego's speed (AV-Fuzzer's type 1 needs the second half: a faster car that cuts in only pulls away)."""
     placed = _place(mut, sc, rng, -30.0, 150.0, rel=rng.uniform(10.0, 40.0))
     if placed is None:
         return None
     ego_lane, lane, pos, depart, v_ego = placed
-    speed = _speed(mut, lane.getID(), rng, 1.05, SPEED_SHARE[1])
+    speed = round(min(SPEED_SHARE[1] * lane_limit(mut, lane.getID()), v_ego * rng.uniform(1.05, 1.25)), 2)
     duration = round(rng.uniform(*LANE_CHANGE_S), 2)
     at = round(rng.uniform(cut_in_gap(0.0, duration), 25.0), 1)  # it is the faster: no closing speed
     change, _ = _toward(lane, mut.rmap.lane(ego_lane))
-    steps = [Maneuver(time=0.5, action=change, value=duration, trigger=Trigger.GAP, at=at)]
-    desc = f"overtakes from {lane.getID()} at {speed:.1f} m/s and cuts in {at} m ahead ({duration} s)"
-    if rng.random() < 0.5:
-        slow = round(v_ego * rng.uniform(0.3, 0.7), 2)
-        rate = round(rng.uniform(*BRAKE_RATE), 1)
-        after = round(duration + rng.uniform(2.5, 5.0), 1)  # the ego has had time to drop back
-        steps.append(Maneuver(time=after, action=ManeuverAction.SPEED, value=slow, trigger=Trigger.AFTER,
-                              rate=rate))
-        desc += f", brakes at {rate} m/s^2 to {slow:.1f} m/s {after} s later"
-    a = _vehicle(mut, sc, lane, pos, speed, depart, steps)
-    return [a], [], {}, f"{a.id} {desc}"
+    slow = round(v_ego * rng.uniform(0.3, 0.8), 2)
+    # as it cuts in (while the ego is within ``at`` + 5-20 m), it slows, no harder than a careful follower
+    # 5 m behind answers after its reaction (braking at 5 m/s^2)
+    rate = round(rng.uniform(1.5, 3.0), 1)
+    within = round(at + rng.uniform(5.0, 20.0), 1)
+    a = _vehicle(mut, sc, lane, pos, speed, depart, [
+        Maneuver(time=0.5, action=change, value=duration, trigger=Trigger.GAP, at=at),
+        Maneuver(time=0.5, action=ManeuverAction.SPEED, value=slow, trigger=Trigger.GAP, at=within, rate=rate)])
+    return [a], [], {}, (f"{a.id} overtakes from {lane.getID()} at {speed:.1f} m/s, cuts in {at} m ahead "
+                         f"({duration} s) and slows to {slow:.1f} m/s at {rate} m/s^2")
 
 
 def beside(mut, sc, rng):

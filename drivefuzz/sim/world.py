@@ -72,6 +72,7 @@ class _Program:
     k: int = 0  # the next step
     fired: float = 0.0  # [s] when the step before fired (the departure for the first)
     above: bool | None = None  # whether the gap or headway was above the next step's ``at`` at the last look
+    armed: bool = False  # the gap or headway has reached the next step's ``at`` (it fires when it may)
     ramp: tuple[float, float] | None = None  # (target speed [m/s], rate [m/s^2]) of a speed step under way
     nudge: tuple[float, float, float] | None = None  # (start [s], duration [s], signed depth [m], left > 0)
 
@@ -118,6 +119,9 @@ class ActorDriver:
             elif a.nav is NavType.MANEUVER:
                 sim.vehicle.setMaxSpeed(actor_id, max(a.speed, 0.1))
                 sim.vehicle.setSpeedFactor(actor_id, MANEUVER_SPEED_FACTOR)
+                # SUMO keeps a car from passing on the right (it matches the speed of one on its left): an
+                # overtaker must be free to pass on either side
+                sim.vehicle.setParameter(actor_id, "laneChangeModel.lcOvertakeRight", "1")
                 if sim.vehicle.getSpeed(actor_id) > a.speed:  # SUMO inserted it at the lane's limit: it enters at its own
                     sim.vehicle.setPreviousSpeed(actor_id, a.speed)
                 sim.vehicle.setLaneChangeMode(actor_id, 512)
@@ -171,7 +175,7 @@ class ActorDriver:
                 while p.k < len(steps) and self._due(vid, steps[p.k], p, t, ego):
                     self._start(vid, steps[p.k], p, t)
                     p.k += 1
-                    p.fired, p.above = t, None
+                    p.fired, p.above, p.armed = t, None, False
                 if p.ramp is not None:
                     self._ramp(vid, p)
                 if p.nudge is not None:
@@ -217,9 +221,11 @@ class ActorDriver:
         if m.action is ManeuverAction.SPEED:  # ahead of the ego, and the ego at ``at`` or nearer
             return gap > 0.0 and value <= m.at
         above = value > m.at
-        crossed = p.above is not None and above != p.above
+        if (p.above is not None and above != p.above) or abs(value - m.at) <= tol:
+            p.armed = True
         p.above = above
-        if not (crossed or abs(value - m.at) <= tol):
+        lane = self.sim.vehicle.getLaneID(vid)
+        if not p.armed or not lane or lane.startswith(":"):  # no lane change inside a junction: after it
             return False
         # fair by construction: never into less room than a careful driver needs at the real closing speed
         # (the NPC may be slower than its program says: stopped at the end of a merge lane, in a queue)
