@@ -1,7 +1,8 @@
 """AV-Fuzzer's five crash types (Li et al., ISSRE 2020), read from a trace: who changed lanes, and where
 the other vehicle was before the contact.
 
-1. ``overtake_cut_in``: the other vehicle came from behind the ego on a lane beside it and cut in;
+1. ``overtake_cut_in``: the other vehicle came from behind the ego on a lane beside it (at any time before)
+   and cut in;
 2. ``ego_cut_in``: the ego changed lanes into the other;
 3. ``cut_in``: the other vehicle, ahead of the ego on a lane beside it all along, cut in;
 4. ``rear_end_braking``: the ego ran into the back of a vehicle braking ahead of it on its lane;
@@ -96,12 +97,19 @@ def crash_type(trace, frame: int, other: str, rmap) -> str:
         return "ego_cut_in"  # the ego moved towards the other more than the other towards it
     came_from_beside = bool(np.any(np.abs(lat) > BESIDE)) and abs(float(lat[-1])) < BESIDE
     if came_from_beside and abs(other_side) >= MOVED and abs(other_side) > abs(ego_side):
-        return "overtake_cut_in" if bool(np.any(lon < 0.0)) else "cut_in"
+        return "overtake_cut_in" if _was_behind(trace, a.ids.index(other), frame) else "cut_in"
     if float(lon[-1]) > 0.0 and abs(float(lat[-1])) < BESIDE:
         speed = a.speed[rows]
         if float(np.max(speed)) - float(speed[-1]) >= BRAKED:
             return "rear_end_braking"
     return "other"
+
+
+def _was_behind(trace, index: int, frame: int) -> bool:
+    """Whether the other vehicle was ever behind the ego's centre on a lane beside it, up to ``frame``."""
+    rows, frames = _window_rows(trace, index, slice(0, frame + 1))
+    lon, lat, _ = _relative(trace, rows, frames, int(frames[0]))
+    return bool(np.any((lon < 0.0) & (np.abs(lat) > BESIDE)))
 
 
 def _squeezed(trace, frame: int, other: str) -> bool:
