@@ -106,5 +106,5 @@ def test_seed_time_limits_let_the_immobility_oracle_fire():
     root = Path(__file__).resolve().parent.parent / "seeds"
     limits = {p.parent.relative_to(root).as_posix(): json.loads(p.read_text())["sim"]["time_limit"]
               for p in root.glob("*/*/scenario.json")}
-    assert len(limits) == 40
+    assert len(limits) == 44
     assert {k: v for k, v in limits.items() if v < floor} == {}

@@ -15,7 +15,7 @@ SEEDS = list_seeds(ROOT / "seeds" / "town") + [p for n in ("highway", "interchan
                                                for p in list_seeds(ROOT / "seeds" / n)]
 
 
-def test_forty_seeds_are_committed():
+def test_forty_four_seeds_are_committed():
     assert len(SEEDS) == 44  # 8 per network, and 4 long highway missions entering at speed (issue 14)
 
 
