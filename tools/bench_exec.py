@@ -58,9 +58,20 @@ def busy_scenario(n_veh: int = 40, n_ped: int = 10, seed: int = 1) -> Scenario:
                     actors=tuple(actors), sim=SimOptions(time_limit=60.0), seed=seed)
 
 
-#: SUMO's lane-change models, as options on top of drivefuzz's own (``--lanechange.duration``, continuous)
+#: SUMO's other lane-change models, in place of drivefuzz's continuous one (``--lanechange.duration 3``)
 LANE_CHANGE_MODELS = {"instant (SUMO's default)": ["--lanechange.duration", "0"],
                       "sublane (--lateral-resolution 0.8)": ["--lanechange.duration", "0", "--lateral-resolution", "0.8"]}
+
+
+def _with(args: list[str], extra: list[str]) -> list[str]:
+    """SUMO's command line ``args`` with the options in ``extra`` replacing (or added to) its own."""
+    out = list(args)
+    for k in range(0, len(extra), 2):
+        if extra[k] in out:
+            out[out.index(extra[k]) + 1] = extra[k + 1]
+        else:
+            out += extra[k:k + 2]
+    return out
 
 
 def sumo_alone(sc: Scenario, extra: list[str] = ()) -> float:
@@ -69,7 +80,7 @@ def sumo_alone(sc: Scenario, extra: list[str] = ()) -> float:
     with tempfile.TemporaryDirectory() as d:
         write_scenario(sc, d)
         t0 = time.perf_counter()
-        libsumo.start(_sumo_args(sc, Path(d), sc.network_path(), gui=False) + list(extra))
+        libsumo.start(_with(_sumo_args(sc, Path(d), sc.network_path(), gui=False), list(extra)))
         steps = int(round(sc.sim.time_limit / sc.sim.step_length))
         for _ in range(steps):
             libsumo.simulationStep()
