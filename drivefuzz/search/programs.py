@@ -2,14 +2,14 @@
 
 AV-Fuzzer perturbs what the vehicles around the ego do, not where they stand. Here each program is one
 or two vehicles, each with a sequence of timed steps (:class:`~drivefuzz.scenario.Maneuver`): speeds
-relative to the lane's limit (0.6-1.2 x), lane changes that take their duration, nudges (aborted lane
+relative to the lane's limit (0.6-1.2 x; a vehicle ahead also slower than the ego), lane changes that take their duration, nudges (aborted lane
 changes), braking at a chosen deceleration. The steps that matter are timed against the ego (a gap or a
 headway trigger), so that a mutant keeps its situation when the ego drives differently.
 
 The programs, and the crash type of AV-Fuzzer (ISSRE 2020) each aims at:
 
 - ``overtake_cut_in`` (1, an NPC overtakes and cuts in): from behind on a lane beside the ego, faster,
-  changes into the ego's lane once it is ``at`` m ahead; sometimes brakes a few seconds later;
+  changes into the ego's lane once it is ``at`` m ahead, and slows down gently as it does;
 - ``beside`` (2, the ego cuts in and hits): rides on the lane beside, near the ego, where an ego that
   changes lanes must look;
 - ``cut_in`` (3, another NPC cuts in): ahead on the lane beside, slower, changes in at a chosen headway;
