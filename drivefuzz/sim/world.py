@@ -122,7 +122,7 @@ class ActorDriver:
                 # SUMO keeps a car from passing on the right (it matches the speed of one on its left): an
                 # overtaker must be free to pass on either side
                 sim.vehicle.setParameter(actor_id, "laneChangeModel.lcOvertakeRight", "1")
-                if sim.vehicle.getSpeed(actor_id) > a.speed:  # SUMO inserted it at the lane's limit: it enters at its own
+                if sim.vehicle.getSpeed(actor_id) > a.speed:  # inserted at the lane's limit: enter at its own
                     sim.vehicle.setPreviousSpeed(actor_id, a.speed)
                 sim.vehicle.setLaneChangeMode(actor_id, 512)
                 self.programs[actor_id] = _Program(fired=t)
@@ -146,20 +146,24 @@ class ActorDriver:
         """Whether a program's vehicle appeared on or across the ego's path (within 2.5 m to its side) nearer
         than a careful driver needs to shed the speed difference, or overlapping the ego. The mutator times
         departures with its profile of how the reference ADS drives; another ADS (or a mutant) is elsewhere."""
-        ex, ey, ch, sh, speed, half = ego
-        fx, fy = self.sim.vehicle.getPosition(vid)
+        gap, lateral, _, length = self._from_ego(vid, ego)
+        if abs(lateral) > POP_UP_LATERAL:
+            return False
+        if gap < 0.0:
+            return gap + length + 2 * ego[5] > 0.0  # beside the ego's body (behind it is no pop-up)
+        shed = max(ego[4] - a.speed, 0.0)
+        need = shed * CAREFUL_REACTION + shed * shed / (2.0 * CAREFUL_DECEL) + POP_UP_MARGIN
+        return gap < need
+
+    def _from_ego(self, vid: str, ego) -> tuple[float, float, float, float]:
+        """(gap [m] from the ego's front to the vehicle's rear along the ego's heading, negative when it is
+        not ahead; its centre's offset [m] to the ego's left; its heading [rad]; its length [m])."""
+        ex, ey, ch, sh, _, half = ego
+        fx, fy = self.sim.vehicle.getPosition(vid)  # the front bumper
         h = math.radians(90.0 - self.sim.vehicle.getAngle(vid))
         length = self.sim.vehicle.getLength(vid)
         dx, dy = fx - 0.5 * length * math.cos(h) - ex, fy - 0.5 * length * math.sin(h) - ey
-        if abs(-sh * dx + ch * dy) > POP_UP_LATERAL:
-            return False
-        lon = ch * dx + sh * dy
-        gap = lon - 0.5 * length - half
-        if gap < 0.0:
-            return lon + 0.5 * length + half > 0.0  # beside the ego's body (behind it is no pop-up)
-        shed = max(speed - a.speed, 0.0)
-        need = shed * CAREFUL_REACTION + shed * shed / (2.0 * CAREFUL_DECEL) + POP_UP_MARGIN
-        return gap < need
+        return ch * dx + sh * dy - 0.5 * length - half, -sh * dx + ch * dy, h, length
 
     def step(self, t: float, alive_vehicles: Sequence[str], alive_persons: Sequence[str],
              ego: tuple[float, float, float, float, float, float] | None = None) -> None:
@@ -199,7 +203,6 @@ class ActorDriver:
                 angle = (90.0 - math.degrees(math.atan2(w[3], w[2]))) % 360.0
                 sim.person.moveToXY(pid, "", w[0], w[1], angle, 2)
 
-
     def _due(self, vid: str, m: Maneuver, p: _Program, t: float, ego) -> bool:
         """Whether step ``m`` of ``vid``'s program fires at ``t`` (see :class:`~drivefuzz.scenario.Trigger`)."""
         depart = self.spec[vid].depart
@@ -209,14 +212,10 @@ class ActorDriver:
             return t - p.fired >= m.time - 1e-9
         if ego is None or t - depart < m.time - 1e-9:
             return False
-        ex, ey, ch, sh, speed, half = ego
-        fx, fy = self.sim.vehicle.getPosition(vid)
-        h = math.radians(90.0 - self.sim.vehicle.getAngle(vid))
-        length = self.sim.vehicle.getLength(vid)
-        dx, dy = fx - 0.5 * length * math.cos(h) - ex, fy - 0.5 * length * math.sin(h) - ey
-        if abs(-sh * dx + ch * dy) > TRIGGER_LATERAL:
+        gap, lateral, h, _ = self._from_ego(vid, ego)
+        if abs(lateral) > TRIGGER_LATERAL:
             return False
-        gap = ch * dx + sh * dy - 0.5 * length - half
+        _, _, ch, sh, speed, _ = ego
         value, tol = (gap, GAP_TOLERANCE) if m.trigger is Trigger.GAP else (gap / max(speed, 1.0), HEADWAY_TOLERANCE)
         if m.action is ManeuverAction.SPEED:  # ahead of the ego, and the ego at ``at`` or nearer
             return gap > 0.0 and value <= m.at
