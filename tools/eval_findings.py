@@ -32,13 +32,14 @@ import shutil
 import sqlite3
 import sys
 import tempfile
-import time
 from collections import Counter
 from pathlib import Path
 from typing import Any
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+
+from campaigns import end_records, run_campaign  # noqa: E402  (tools/, beside this script)
 
 VERDICTS = ("ego", "other", "unclear")
 
@@ -70,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
             out = base / s
             if out.exists() and any(out.iterdir()):
                 sys.exit(f"{out} exists and is not empty: give another --keep, or remove it")
-            wall = run_campaign(out, s, args)
+            wall = run_strategy(out, s, args)
             report(out, strategy=s, wall_s=wall)
     finally:
         if tmp:
@@ -95,9 +96,9 @@ def _network_and_seeds(name: str):
     return net, seeds
 
 
-def run_campaign(out: Path, strategy: str, args) -> float:
+def run_strategy(out: Path, strategy: str, args) -> float:
     """Run one campaign into ``out``; return its wall time [s]."""
-    from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
+    from drivefuzz.campaign.fuzz import FuzzConfig
 
     net, seeds = _network_and_seeds(args.network)
     cfg = FuzzConfig(max_execs=args.execs, strategy=strategy, seed=args.seed, reproduce=args.reproduce)
@@ -105,16 +106,7 @@ def run_campaign(out: Path, strategy: str, args) -> float:
             "--network", args.network]
     print(f"running: strategy {strategy}, {args.execs} executions, {len(seeds)} seeds of {net.name}, "
           f"seed {args.seed}, {args.jobs} job(s) -> {out}", file=sys.stderr, flush=True)
-    campaign = Campaign(out, seeds, cfg, argv)
-    t0 = time.perf_counter()
-    if args.jobs > 1:
-        from drivefuzz.campaign.cluster import dask_client
-
-        with dask_client("local", jobs=args.jobs) as client:
-            campaign.run(client=client)
-    else:
-        campaign.run()
-    return time.perf_counter() - t0
+    return run_campaign(out, seeds, cfg, argv, args.jobs)
 
 
 # ------------------------------------------------------------------------------ reading a campaign
@@ -132,19 +124,6 @@ def _folders(out: Path, sub: str) -> list[dict[str, Any]]:
                      "label": (v.get("signature") or {}).get("label") or "",
                      "reproduction": v.get("reproduction"), "triage": v.get("triage_executions", 0) or 0})
     return rows
-
-
-def _journal(out: Path) -> list[dict[str, Any]]:
-    recs = []
-    for path in sorted((out / "jobs").glob("*/journal.jsonl")):
-        for line in path.read_text().splitlines():
-            try:
-                rec = json.loads(line)
-            except json.JSONDecodeError:
-                continue
-            if rec.get("event") == "end":
-                recs.append(rec)
-    return recs
 
 
 def report(out: Path, strategy: str, wall_s: float | None) -> None:
@@ -202,7 +181,7 @@ def _print_triage_cost(out: Path, folders: list[dict[str, Any]]) -> None:
     total = sum(r["triage"] for r in folders)
     print(f"triage executions (verdict.json triage_executions): {total} over {len(folders)} new signature(s), "
           f"{total / max(len(folders), 1):.1f} each, max {max((r['triage'] for r in folders), default=0)}")
-    recs = _journal(out)
+    recs = end_records(out)
     plain = [r["wall_time"] for r in recs if r.get("wall_time") and not r.get("signature")]
     firsts = {r["verdict"].get("key") for r in folders}
     new = [r for r in recs if r.get("key") in firsts]

@@ -31,12 +31,13 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import time
 from collections import Counter, defaultdict
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO))
+
+from campaigns import end_records, run_campaign  # noqa: E402  (tools/, beside this script)
 
 NETWORK = REPO / "networks" / "highway.net.xml"
 LABELS = {"overtake_cut_in": "1 NPC overtakes and cuts in", "ego_cut_in": "2 ego cuts in and hits",
@@ -69,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
             out = base / name.replace(":", "-").replace("=", "-")
             if out.exists() and any(out.iterdir()):
                 sys.exit(f"{out} exists and is not empty: give another --keep, or remove it")
-            wall = run_campaign(out, name, args)
+            wall = run_ads(out, name, args)
             report(out, wall_s=wall)
     finally:
         if tmp:
@@ -77,8 +78,9 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def run_campaign(out: Path, ads: str, args) -> float:
-    from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
+def run_ads(out: Path, ads: str, args) -> float:
+    """Run the maneuver campaign of one ADS (NAME or NAME:KEY=VALUE) into ``out``; return its wall time [s]."""
+    from drivefuzz.campaign.fuzz import FuzzConfig
     from drivefuzz.scenario import AdsSpec
     from drivefuzz.scenario.seed import list_seeds
     from drivefuzz.scenario.sumofiles import load_scenario
@@ -91,29 +93,7 @@ def run_campaign(out: Path, ads: str, args) -> float:
     argv = ["tools/eval_maneuver.py", "--execs", str(args.execs), "--seed", str(args.seed), "--ads", ads]
     print(f"running: maneuver, ADS {ads}, {args.execs} executions, {len(seeds)} highway seeds, seed {args.seed}, "
           f"{args.jobs} job(s) -> {out}", file=sys.stderr, flush=True)
-    campaign = Campaign(out, seeds, cfg, argv)
-    t0 = time.perf_counter()
-    if args.jobs > 1:
-        from drivefuzz.campaign.cluster import dask_client
-
-        with dask_client("local", jobs=args.jobs) as client:
-            campaign.run(client=client)
-    else:
-        campaign.run()
-    return time.perf_counter() - t0
-
-
-def _records(out: Path) -> list[dict]:
-    recs = []
-    for path in sorted((out / "jobs").glob("*/journal.jsonl")):
-        for line in path.read_text().splitlines():
-            try:
-                rec = json.loads(line)
-            except json.JSONDecodeError:
-                continue
-            if rec.get("event") == "end":
-                recs.append(rec)
-    return recs
+    return run_campaign(out, seeds, cfg, argv, args.jobs)
 
 
 def classify(out: Path, rec: dict, ads: dict) -> tuple[str, str]:
@@ -139,7 +119,7 @@ def classify(out: Path, rec: dict, ads: dict) -> tuple[str, str]:
 def report(out: Path, wall_s: float | None) -> None:
     manifest = json.loads((out / "manifest.json").read_text())
     ads = (manifest.get("config") or {}).get("ads") or {"name": "ego", "options": {}}
-    recs = _records(out)
+    recs = end_records(out)
     collisions = [r for r in recs if str(r.get("verdict", "")).startswith("collision")]
     who = ads["name"] + "".join(f" {k}={v}" for k, v in (ads.get("options") or {}).items())
     print(f"\n== {out}  ADS {who}: {len(recs)} executions"
