@@ -1,8 +1,8 @@
 """Does the maneuver strategy reach AV-Fuzzer's five crash types, and fairly?
 
 Runs one ``maneuver`` campaign per ADS on the highway's committed seeds (``FuzzConfig(max_execs=N,
-strategy="maneuver", seed=SEED)``, everything else as ``drivefuzz fuzz`` has it; the clean reference ADS
-and ``--ads sumo`` by default), then, for every execution whose collision oracle fired, replays the
+strategy="maneuver", seed=SEED)``, everything else as ``drivefuzz fuzz`` has it; by default the clean
+reference ADS, ``sumo`` and the reference ADS with its ``late_braking`` fault), then, for every execution whose collision oracle fired, replays the
 scenario the campaign kept for it (``corpus/<hash>``, named in its journal record) and classifies the
 contact from the trace (:func:`drivefuzz.triage.crashtype.crash_type`: who changed lanes, where the
 other vehicle was before). It prints, per ADS and per crash type:
@@ -17,7 +17,8 @@ and the crash types that never occurred.
 
 Usage::
 
-    python tools/eval_maneuver.py [--execs 1000] [--seed 0] [--ads ego,sumo] [--jobs 2] [--keep DIR]
+    python tools/eval_maneuver.py [--execs 1000] [--seed 0] [--ads ego,sumo,ego:fault=late_braking] [--jobs 2]
+                                  [--keep DIR]
     python tools/eval_maneuver.py --report DIR/ego DIR/sumo
 
 Prints only; an evaluation, not a test.
@@ -40,6 +41,9 @@ sys.path.insert(0, str(REPO))
 from campaigns import end_records, run_campaign  # noqa: E402  (tools/, beside this script)
 
 NETWORK = REPO / "networks" / "highway.net.xml"
+#: The clean reference ADS, SUMO's own driver, and the reference ADS with a known bug (it sees obstacles only
+#: within 4 m): the crash types an ADS shows depend on its bugs, and a buggy one shows what the strategy can reach
+DEFAULT_ADS = ("ego", "sumo", "ego:fault=late_braking")
 LABELS = {"overtake_cut_in": "1 NPC overtakes and cuts in", "ego_cut_in": "2 ego cuts in and hits",
           "cut_in": "3 NPC cuts in front of the ego", "rear_end_braking": "4 ego rear-ends a braking NPC",
           "squeeze": "5 two NPCs squeeze the ego", "other": "- other contact"}
@@ -49,8 +53,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--execs", type=int, default=1000, help="executions per campaign [1000]")
     ap.add_argument("--seed", type=int, default=0, help="campaign RNG seed [0]")
-    ap.add_argument("--ads", default="ego,sumo", help="comma-separated ADS plugins, one campaign each, with "
-                    "options as NAME:KEY=VALUE (e.g. ego:fault=late_braking) [ego,sumo]")
+    ap.add_argument("--ads", default=",".join(DEFAULT_ADS), help="comma-separated ADS plugins, one campaign "
+                    f"each, with options as NAME:KEY=VALUE [{','.join(DEFAULT_ADS)}]")
     ap.add_argument("--jobs", type=int, default=2, help="seed jobs at once on a local Dask cluster [2]")
     ap.add_argument("--keep", type=Path, help="keep the campaign directories here (DIR/<ads>)")
     ap.add_argument("--report", type=Path, nargs="+", help="only classify and print these campaign directories")
