@@ -223,3 +223,23 @@ def test_crash_type_squeeze():
                                                          trigger=Trigger.GAP, at=15.0)).model_dump(), "id": "v1"})
     kind, _ = crash(highway(left, right), "no_control")
     assert kind == "squeeze"
+
+
+def test_a_finding_folder_names_its_crash_type(tmp_path):
+    import json
+
+    from drivefuzz.triage.store import FindingStore, TriageConfig
+    from drivefuzz.triage.table import finding_rows
+    from oracles.collision import CollisionOracle
+
+    leader = npc("hw0_1", 70.0, 20.0, Maneuver(time=3.0, action="speed", value=0.0, rate=8.0))
+    sc = highway(leader)
+    sc = sc.model_copy(update={"ads": sc.ads.model_copy(update={"options": {"fault": "late_braking"}})})
+    ex = execute(sc, oracles=[CollisionOracle()])
+    store = FindingStore(tmp_path, load_roadmap(NET), lambda s: (ex.misbehaviors, ex.trace),
+                         TriageConfig(counterfactual=False, reproduce=0))
+    filed = store.triage(sc, list(ex.misbehaviors), ex.trace, "0/0/0/0", "misbehavior")
+    verdict = json.loads((tmp_path / filed.rel / "verdict.json").read_text())
+    assert verdict["crash_type"] == "rear_end_braking"
+    (row,) = finding_rows(tmp_path, incidents=filed.rel.startswith("incidents"))
+    assert row.crash_type == "rear_end_braking"

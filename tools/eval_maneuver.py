@@ -44,9 +44,7 @@ NETWORK = REPO / "networks" / "highway.net.xml"
 #: The clean reference ADS, SUMO's own driver, and the reference ADS with a known bug (it sees obstacles only
 #: within 4 m): the crash types an ADS shows depend on its bugs, and a buggy one shows what the strategy can reach
 DEFAULT_ADS = ("ego", "sumo", "ego:fault=late_braking")
-LABELS = {"overtake_cut_in": "1 NPC overtakes and cuts in", "ego_cut_in": "2 ego cuts in and hits",
-          "cut_in": "3 NPC cuts in front of the ego", "rear_end_braking": "4 ego rear-ends a braking NPC",
-          "squeeze": "5 two NPCs squeeze the ego", "other": "- other contact"}
+from drivefuzz.triage.crashtype import LABELS  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -138,13 +136,13 @@ def report(out: Path, wall_s: float | None) -> None:
         if note:
             notes[note] += 1
         by_type[kind].append(r)
-    print(f"{'crash type':34} {'collisions':>10} {'signatures':>10} {'ego fault':>10}   reproduction of their folders")
+    print(f"{'crash type':38} {'collisions':>10} {'signatures':>10} {'ego fault':>10}   reproduction of their folders")
     for kind, label in LABELS.items():
         rows = by_type.get(kind, [])
         folders = {r.get("finding") or r.get("incident") for r in rows}
         ego = sum(1 for r in rows if r.get("fault") in ("ego", "unclear"))
         share = f"{ego}/{len(rows)}" if rows else "-"
-        print(f"{label:34} {len(rows):>10} {len(folders):>10} {share:>10}   {_reproduction(out, folders)}")
+        print(f"{label:38} {len(rows):>10} {len(folders):>10} {share:>10}   {_reproduction(out, folders)}")
     missing = [LABELS[k] for k in LABELS if k != "other" and not by_type.get(k)]
     print("types not seen: " + (", ".join(missing) if missing else "none (all five occurred)"))
     for note, n in notes.items():

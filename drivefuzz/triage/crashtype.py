@@ -19,6 +19,10 @@ import numpy as np
 from drivefuzz.triage.evidence import frames_before
 
 CRASH_TYPES = ("overtake_cut_in", "ego_cut_in", "cut_in", "rear_end_braking", "squeeze")
+#: How a report names each type (and ``other``)
+LABELS = {"overtake_cut_in": "1: an NPC overtook and cut in", "ego_cut_in": "2: the ego cut in and hit",
+          "cut_in": "3: an NPC cut in front of the ego", "rear_end_braking": "4: the ego rear-ended a braking NPC",
+          "squeeze": "5: two NPCs squeezed the ego", "other": "none of the five"}
 #: [s] of trace before the contact that the classification reads
 WINDOW = 10.0
 #: [m] sideways from the ego's centre line beyond which a vehicle is on a lane beside it (lanes ~3.5 m)
@@ -71,45 +75,48 @@ def _sideways(speed, heading, road) -> float:
     return float(np.sum(speed * np.sin(heading - road)))
 
 
+def _off_path(trace, rmap, frame: int, xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
+    """[m] signed offset (left +) of points from the ego's path up to ``frame``, square to its lane there: on
+    a curved ramp a vehicle ahead is beside the ego's heading but on its road."""
+    k = np.arange(0, frame + 1, 2)  # every other frame: 0.1 s apart, a couple of metres at most
+    px, py = np.asarray(trace["x"][k], dtype=float), np.asarray(trace["y"][k], dtype=float)
+    road = _road_heading(trace, rmap, k)
+    i = np.argmin((xs[:, None] - px[None, :]) ** 2 + (ys[:, None] - py[None, :]) ** 2, axis=1)
+    return -np.sin(road[i]) * (xs - px[i]) + np.cos(road[i]) * (ys - py[i])
+
+
 def crash_type(trace, frame: int, other: str, rmap) -> str:
     """The crash type (one of :data:`CRASH_TYPES`, or ``other``) of the ego's contact with vehicle ``other``
-    at ``frame``; ``rmap`` is the network's :class:`~drivefuzz.scenario.roadmap.RoadMap` (the road's direction
-    says who moved sideways, on curved ramps too)."""
+    at ``frame``; ``rmap`` is the network's :class:`~drivefuzz.scenario.roadmap.RoadMap` (who moved sideways
+    is measured against the road, on curved ramps too)."""
     a = trace.actors
     if other not in a.ids:
         return "other"
-    w = frames_before(trace, frame, WINDOW)
-    rows, frames = _window_rows(trace, a.ids.index(other), w)
+    index = a.ids.index(other)
+    rows, frames = _window_rows(trace, index, slice(0, frame + 1))
     if len(rows) < 2:
         return "other"
-    lon, lat, _ = _relative(trace, rows, frames, int(frames[0]))
-    dt = trace.step_length
-    road = _road_heading(trace, rmap, frames)
-    ego_side = _sideways(trace["speed"][frames], trace["heading"][frames], road) * dt
-    other_side = _sideways(a.speed[rows], a.heading[rows], road) * dt
+    lon, _, _ = _relative(trace, rows, frames, int(frames[0]))
+    off = _off_path(trace, rmap, frame, a.x[rows], a.y[rows])  # the other, from the ego's road
+    window = frames >= frames_before(trace, frame, WINDOW).start
     recent = frames >= frames_before(trace, frame, MOVE_WINDOW).start
-    ego_recent = _sideways(trace["speed"][frames[recent]], trace["heading"][frames[recent]], road[recent]) * dt
-    other_recent = _sideways(a.speed[rows[recent]], a.heading[rows[recent]], road[recent]) * dt
-    side = float(np.sign(lat[recent][0]))  # where the other was: + left of the ego, - right
+    e = frames[recent]
+    ego_recent = _sideways(trace["speed"][e], trace["heading"][e], _road_heading(trace, rmap, e)) * trace.step_length
+    other_recent = float(off[recent][-1] - off[recent][0])
+    side = float(np.sign(off[recent][0]))  # where the other was: + left of the ego's road, - right
     if _squeezed(trace, frame, other):
         return "squeeze"
     if side * ego_recent >= EGO_MOVED and side * ego_recent > -side * other_recent:
         return "ego_cut_in"  # the ego moved towards the other more than the other towards it
-    came_from_beside = bool(np.any(np.abs(lat) > BESIDE)) and abs(float(lat[-1])) < BESIDE
-    if came_from_beside and abs(other_side) >= MOVED and abs(other_side) > abs(ego_side):
-        return "overtake_cut_in" if _was_behind(trace, a.ids.index(other), frame) else "cut_in"
-    if float(lon[-1]) > 0.0 and abs(float(lat[-1])) < BESIDE:
-        speed = a.speed[rows]
+    w_off = off[window]
+    if bool(np.any(np.abs(w_off) > BESIDE)) and abs(float(w_off[-1])) < BESIDE \
+            and abs(float(w_off[-1] - w_off[0])) >= MOVED:  # it came in from a lane beside
+        return "overtake_cut_in" if bool(np.any((lon < 0.0) & (np.abs(off) > BESIDE))) else "cut_in"
+    if float(lon[-1]) > 0.0 and abs(float(off[-1])) < BESIDE:
+        speed = a.speed[rows[window]]
         if float(np.max(speed)) - float(speed[-1]) >= BRAKED:
             return "rear_end_braking"
     return "other"
-
-
-def _was_behind(trace, index: int, frame: int) -> bool:
-    """Whether the other vehicle was ever behind the ego's centre on a lane beside it, up to ``frame``."""
-    rows, frames = _window_rows(trace, index, slice(0, frame + 1))
-    lon, lat, _ = _relative(trace, rows, frames, int(frames[0]))
-    return bool(np.any((lon < 0.0) & (np.abs(lat) > BESIDE)))
 
 
 def _squeezed(trace, frame: int, other: str) -> bool:

@@ -28,6 +28,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from drivefuzz.triage.crashtype import LABELS as CRASH_LABELS
 from drivefuzz.triage.table import CampaignInfo, FindingRow, finding_rows, load_campaign_info
 
 #: cards at most (findings first, then incidents): the report stays quick to write and to open
@@ -555,6 +556,8 @@ def _card_html(c: Card) -> str:
             f"<h3>#{r.number} {_e(r.label)}</h3>"
             f'<p class="meta"><b>{_e(r.verdict)}</b> {_e(_event_text(m))}</p>'
             f'<p class="meta">fault <span class="pill {_e(r.fault)}">{_e(r.fault)}</span> {_e(r.reason)}</p>'
+            + (f'<p class="meta">AV-Fuzzer crash type {_e(CRASH_LABELS[r.crash_type])}</p>'
+               if r.crash_type in CRASH_LABELS and r.crash_type != "other" else "") +
             f'<p class="meta">{r.hits} hit(s) &middot; reproduced {_e(r.reproduction)} &middot; first seen {_e(_first_seen(r))}'
             f" &middot; folder <code>{_e(r.folder)}</code></p>"
             f'<div class="pics">{pics}</div>{notes}<pre>{_e(r.replay)}</pre>{_minimal_html(r)}</div>')
@@ -615,6 +618,8 @@ def render_markdown(info: CampaignInfo, findings: list[FindingRow], incidents: l
             event = _event_text(cards[r.folder].misbehavior) if r.folder in cards else ""
             lines += [f"### #{r.number} {r.label}", "", f"- verdict: {r.verdict} {event}".rstrip(),
                       f"- fault: {r.fault} ({r.reason})",
+                      *([f"- AV-Fuzzer crash type {CRASH_LABELS[r.crash_type]}"]
+                        if r.crash_type in CRASH_LABELS and r.crash_type != "other" else []),
                       f"- {r.hits} hit(s); reproduced {r.reproduction}; first seen {_first_seen(r)}",
                       f"- folder: `{r.folder}`", "", "```sh", r.replay, "```", ""]
             if r.minimal is not None:

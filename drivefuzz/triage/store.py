@@ -162,6 +162,10 @@ class FindingStore:
                 "reproduction": reproduction, "triage_executions": spent, "ads": scenario.ads.model_dump(mode="json"),
                 "drivefuzz": drivefuzz.__version__, **self.extra, **(extra or {}),
             }
+            if trace is not None and m.oracle == "collision" and m.kind == "vehicle" and m.actors:
+                from drivefuzz.triage.crashtype import crash_type
+
+                verdict["crash_type"] = crash_type(trace, m.frame, m.actors[0], self.rmap)
             if shrunk is not None:
                 from drivefuzz.triage.shrink import MINIMAL, write_minimal
 

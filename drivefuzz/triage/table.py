@@ -50,6 +50,7 @@ class FindingRow:
     replay: str  # the command that replays it
     incident: bool = False
     minimal: str | None = None  # the shrunk reproducer: what it kept, and the command that replays it
+    crash_type: str | None = None  # a collision with a vehicle: AV-Fuzzer's crash type (triage/crashtype.py)
 
     @property
     def minimal_replay(self) -> str | None:
@@ -251,6 +252,7 @@ def _row(n: int, rel: str, path: Path, v: dict[str, Any], first, indexed_hits, i
         replay=replay_command(path, ads.get("name") if isinstance(ads.get("name"), str) else None),
         incident=incident, minimal=_minimal(path, v, ads.get("name") if isinstance(ads.get("name"), str) else None,
                                             replay_command),
+        crash_type=v["crash_type"] if isinstance(v.get("crash_type"), str) else None,
     )
 
 
