@@ -8,8 +8,10 @@ the other vehicle was before the contact.
 4. ``rear_end_braking``: the ego ran into the back of a vehicle braking ahead of it on its lane;
 5. ``squeeze``: two vehicles closed in on the ego at once (a second one within :data:`SQUEEZE_GAP` of it).
 
-Anything else is ``other`` (the ego hit from behind, a vehicle that slowed long before, a crossing). Used by
-``tools/eval_maneuver.py``; works on a frozen :class:`~drivefuzz.sim.trace.Trace` and the road map.
+Anything else is ``other`` (the ego hit from behind, a vehicle that slowed long before, a crossing). The
+finding store records it for every collision with a vehicle (``verdict.json``: ``crash_type``), the report
+names it, and ``tools/eval_maneuver.py`` counts it; works on a frozen :class:`~drivefuzz.sim.trace.Trace`
+and the road map.
 """
 
 from __future__ import annotations
@@ -39,17 +41,13 @@ SQUEEZE_GAP = 2.0
 BRAKED = 2.0
 
 
-def _relative(trace, rows, frames, base_frame: int):
-    """(longitudinal, lateral) [m] of an actor's centre in the ego's frame at each of ``frames``, and its
-    sideways position [m] square to the ego's heading at ``base_frame``."""
+def _relative(trace, rows, frames):
+    """(longitudinal, lateral) [m] of an actor's centre (``rows`` of the actor samples) in the ego's frame at
+    each of ``frames``."""
     a = trace.actors
     ex, ey, eh = trace["x"][frames], trace["y"][frames], trace["heading"][frames]
     dx, dy = a.x[rows] - ex, a.y[rows] - ey
-    lon = np.cos(eh) * dx + np.sin(eh) * dy
-    lat = -np.sin(eh) * dx + np.cos(eh) * dy
-    h0 = trace["heading"][base_frame]
-    across = -np.sin(h0) * a.x[rows] + np.cos(h0) * a.y[rows]
-    return lon, lat, across
+    return np.cos(eh) * dx + np.sin(eh) * dy, -np.sin(eh) * dx + np.cos(eh) * dy
 
 
 def _window_rows(trace, index: int, w: slice):
@@ -96,7 +94,7 @@ def crash_type(trace, frame: int, other: str, rmap) -> str:
     rows, frames = _window_rows(trace, index, slice(0, frame + 1))
     if len(rows) < 2:
         return "other"
-    lon, _, _ = _relative(trace, rows, frames, int(frames[0]))
+    lon, _ = _relative(trace, rows, frames)
     off = _off_path(trace, rmap, frame, a.x[rows], a.y[rows])  # the other, from the ego's road
     window = frames >= frames_before(trace, frame, WINDOW).start
     recent = frames >= frames_before(trace, frame, MOVE_WINDOW).start
@@ -130,7 +128,7 @@ def _squeezed(trace, frame: int, other: str) -> bool:
         rows, frames = _window_rows(trace, j, w)
         if not len(rows):
             continue
-        lon, lat, _ = _relative(trace, rows, frames, int(frames[0]))
+        lon, lat = _relative(trace, rows, frames)
         gap_lon = np.abs(lon) - half_l - 0.5 * a.length[j]
         gap_lat = np.abs(lat) - half_w - 0.5 * a.width[j]
         if bool(np.any(np.maximum(gap_lon, gap_lat) < SQUEEZE_GAP)):
