@@ -157,3 +157,29 @@ def test_a_changed_network_file_is_a_new_key(tmp_path, monkeypatch):
     k1 = netcache.entry_key(net, code, "x")
     net.write_bytes(NETWORKS[0].read_bytes() + b"\n")
     assert netcache.entry_key(net, code, "x") != k1
+
+
+def test_a_sound_network_is_not_checked_again_but_a_faulty_one_is(tmp_path, monkeypatch):
+    from drivefuzz.errors import InvalidNetwork
+    from drivefuzz.scenario import validate
+
+    monkeypatch.setenv("DRIVEFUZZ_CACHE", str(tmp_path / "cache"))
+    net = tmp_path / "n.net.xml"
+    net.write_bytes(NETWORKS[0].read_bytes())
+    validate.check_network(net)
+    assert validate._checked_before(net.resolve())
+    monkeypatch.setattr(validate, "_checked", {})  # a new process
+    monkeypatch.setattr(validate, "_check_network_xml", lambda p: pytest.fail("checked again"))
+    validate.check_network(net)
+    monkeypatch.undo()
+    monkeypatch.setenv("DRIVEFUZZ_CACHE", str(tmp_path / "cache"))
+    for entry in (tmp_path / "cache").glob("*.npz"):
+        entry.write_bytes(b"corrupt")
+    assert not validate._checked_before(net.resolve())
+    bad = tmp_path / "bad.net.xml"
+    bad.write_text(NETWORKS[0].read_text().replace("<net ", "<notnet ", 1).replace("</net>", "</notnet>"))
+    for _ in range(2):
+        monkeypatch.setattr(validate, "_checked", {})
+        with pytest.raises(InvalidNetwork, match="root element"):
+            validate.check_network(bad)
+        assert not validate._checked_before(bad.resolve())
