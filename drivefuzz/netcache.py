@@ -56,20 +56,24 @@ def file_sha256(path: str | os.PathLike) -> str:
     return _file_sha256(p, st.st_mtime_ns, st.st_size)
 
 
-def entry_key(net: str | os.PathLike, code: str | os.PathLike, kind: str, *extra: str) -> str:
-    """The key of ``kind`` derived from network ``net`` by the module whose source file is ``code``."""
-    return "-".join((file_sha256(net)[:32], file_sha256(code)[:16], kind, *extra))
+def entry_key(net: str | os.PathLike, code: str | os.PathLike, kind: str, *extra: str) -> str | None:
+    """The key of ``kind`` derived from network ``net`` by the module whose source file is ``code``
+    (None, and nothing is cached, where either file cannot be read)."""
+    try:
+        return "-".join((file_sha256(net)[:32], file_sha256(code)[:16], kind, *extra))
+    except OSError:
+        return None
 
 
-def _path(key: str) -> Path | None:
+def _path(key: str | None) -> Path | None:
     d = cache_dir()
-    if d is None:
+    if d is None or key is None:
         return None
     name = hashlib.sha256(key.encode()).hexdigest()[:40]  # the key may hold any characters
     return d / f"{name}.npz"
 
 
-def load(key: str) -> dict[str, np.ndarray] | None:
+def load(key: str | None) -> dict[str, np.ndarray] | None:
     """The arrays stored under ``key``, or None (no entry, or one that is unreadable or not this key's)."""
     path = _path(key)
     if path is None or not path.is_file():
@@ -85,7 +89,7 @@ def load(key: str) -> dict[str, np.ndarray] | None:
         return None
 
 
-def store(key: str, arrays: Mapping[str, np.ndarray]) -> bool:
+def store(key: str | None, arrays: Mapping[str, np.ndarray]) -> bool:
     """Store ``arrays`` under ``key`` atomically; False (silently) when the cache is off or not writable."""
     path = _path(key)
     if path is None:

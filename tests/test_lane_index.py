@@ -183,3 +183,9 @@ def test_a_sound_network_is_not_checked_again_but_a_faulty_one_is(tmp_path, monk
         with pytest.raises(InvalidNetwork, match="root element"):
             validate.check_network(bad)
         assert not validate._checked_before(bad.resolve())
+
+
+def test_no_key_no_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("DRIVEFUZZ_CACHE", str(tmp_path))
+    assert netcache.entry_key(tmp_path / "gone.net.xml", netcache.__file__, "x") is None
+    assert not netcache.store(None, {"a": np.zeros(1)}) and netcache.load(None) is None
