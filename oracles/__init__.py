@@ -19,7 +19,8 @@ executor calls all of them after every simulation step) and keeps only a few
 scalars of state. Units are SI (m, s, m/s); reports add km/h where a person
 reads speeds.
 
-This module holds the small helpers several oracles share.
+This module holds the small helpers several oracles share; ``lane_index`` holds the
+lane-invasion oracle's network geometry (built on demand, its junction areas cached on disk).
 """
 
 from __future__ import annotations

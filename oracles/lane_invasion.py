@@ -2,260 +2,19 @@
 
 from __future__ import annotations
 
-import bisect
 import math
-from dataclasses import dataclass, field
 from typing import Sequence
 
 from pydantic import Field
 
 from drivefuzz.oracle import Frame, Misbehavior, Oracle, RunContext
-from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN
 from oracles import wrap_angle
+from oracles.lane_index import CELL as _CELL, REACH as _REACH, Lane as _Lane, index as _index
 
-#: Grid cell [m] of the lane-segment index.
-_CELL = 8.0
-#: Lateral reach [m] beyond a lane's half width for which a segment is indexed (>= any sane tolerance).
-_REACH = 1.5
 #: Heading difference above which a lane runs against the ego.
 _OPPOSITE = math.radians(135.0)
-#: Heading change at one vertex of a lane's shape from which the vertex counts as a street corner.
-_BEND = math.radians(30.0)
 #: Severity order when corners disagree.
 _SEVERITY = {"opposite_lane": 4, "sidewalk": 3, "solid_line": 2, "off_road": 1}
-
-
-@dataclass
-class _Lane:
-    id: str
-    edge: str
-    index: int
-    width: float
-    passenger: bool
-    pedestrian: bool
-    from_node: str
-    to_node: str
-    # per segment: x0, y0, ux, uy, length, cumulative start, heading
-    segs: list[tuple[float, float, float, float, float, float, float]] = field(default_factory=list)
-    starts: list[float] = field(default_factory=list)  # cumulative start of every segment
-    total: float = 0.0
-    change_left: bool = True  # passenger cars may change to the lane on the left
-    change_right: bool = True
-    bends: list[float] = field(default_factory=list)  # [m] along the lane: vertices that turn by >= _BEND
-
-    def near_bend(self, s0: float, s1: float) -> bool:
-        """Whether a sharp bend lies between ``s0`` and ``s1`` [m along the lane]."""
-        k = bisect.bisect_left(self.bends, s0)
-        return k < len(self.bends) and self.bends[k] <= s1
-
-    def seg_at(self, s: float) -> int:
-        return min(max(bisect.bisect_right(self.starts, s) - 1, 0), len(self.segs) - 1)
-
-    def distance(self, x: float, y: float, i0: int = 0, i1: int | None = None) -> tuple[float, float]:
-        """(distance [m] from the centre line, heading there) for a point beside the lane, inf if
-        it lies before the lane start or after its end. Only segments i0..i1 are searched."""
-        best, head = math.inf, 0.0
-        last = len(self.segs) - 1
-        for i in range(i0, last + 1 if i1 is None else min(i1, last) + 1):
-            x0, y0, ux, uy, ln, _c, h = self.segs[i]
-            px, py = x - x0, y - y0
-            t = px * ux + py * uy
-            if t < 0.0:
-                if i == 0:
-                    continue
-                t = 0.0
-            elif t > ln:
-                if i == last:
-                    continue
-                t = ln
-            d = math.hypot(px - t * ux, py - t * uy)
-            if d < best:
-                best, head = d, h
-        return best, head
-
-
-class _NetIndex:
-    """Per-network, read-only geometry for the oracle (built once per process and network)."""
-
-    def __init__(self, rmap):
-        net = rmap.net
-        self.lanes: dict[str, _Lane] = {}
-        for e in net.getEdges(withInternal=False):
-            if e.getFunction() != "":
-                continue
-            fr, to = e.getFromNode().getID(), e.getToNode().getID()
-            for ln in e.getLanes():
-                pts = [(float(p[0]), float(p[1])) for p in ln.getShape()]
-                lane = _Lane(ln.getID(), e.getID(), ln.getIndex(), float(ln.getWidth()),
-                             bool(ln.allows(PASSENGER)), bool(ln.allows(PEDESTRIAN)), fr, to)
-                cum = 0.0
-                for (x0, y0), (x1, y1) in zip(pts[:-1], pts[1:]):
-                    d = math.hypot(x1 - x0, y1 - y0)
-                    if d < 1e-9:
-                        continue
-                    lane.segs.append((x0, y0, (x1 - x0) / d, (y1 - y0) / d, d, cum, math.atan2(y1 - y0, x1 - x0)))
-                    lane.starts.append(cum)
-                    cum += d
-                lane.total = cum
-                if not lane.segs:
-                    continue
-                lane.bends = [b[5] for a, b in zip(lane.segs[:-1], lane.segs[1:])
-                              if abs(wrap_angle(b[6] - a[6])) >= _BEND]
-                lane.change_left = rmap.may_change(lane.id, left=True)
-                lane.change_right = rmap.may_change(lane.id, left=False)
-                self.lanes[lane.id] = lane
-        self.edge_lanes: dict[str, list[_Lane]] = {}
-        for lane in self.lanes.values():
-            self.edge_lanes.setdefault(lane.edge, []).append(lane)
-        for lanes in self.edge_lanes.values():
-            lanes.sort(key=lambda l: l.index)
-        self.edge_by_index = {e: {l.index: l for l in lanes} for e, lanes in self.edge_lanes.items()}
-        # the reverse of every edge: same nodes, swapped
-        by_nodes: dict[tuple[str, str], set[str]] = {}
-        for lane in self.lanes.values():
-            by_nodes.setdefault((lane.from_node, lane.to_node), set()).add(lane.edge)
-        self.reverse: dict[str, frozenset[str]] = {}
-        for (fr, to), edges in by_nodes.items():
-            rev = frozenset(by_nodes.get((to, fr), ()))
-            for e in edges:
-                self.reverse[e] = rev
-        # grid of lane segments
-        self.grid: dict[tuple[int, int], list[tuple[_Lane, int]]] = {}
-        for lane in self.lanes.values():
-            r = 0.5 * lane.width + _REACH
-            for i, (x0, y0, ux, uy, ln, _c, _h) in enumerate(lane.segs):
-                x1, y1 = x0 + ux * ln, y0 + uy * ln
-                for cx in range(int(math.floor((min(x0, x1) - r) / _CELL)), int(math.floor((max(x0, x1) + r) / _CELL)) + 1):
-                    for cy in range(int(math.floor((min(y0, y1) - r) / _CELL)),
-                                    int(math.floor((max(y0, y1) + r) / _CELL)) + 1):
-                        self.grid.setdefault((cx, cy), []).append((lane, i))
-        # junction areas a car may drive on: junction shapes minus walking areas; walking areas
-        from shapely.geometry import LineString, Polygon
-        from shapely.ops import unary_union
-
-        junctions, walks = [], []
-        def area(shape):
-            """The shape as a valid polygon, or None where it has no area."""
-            if len(shape) < 3:
-                return None
-            poly = Polygon([(p[0], p[1]) for p in shape]).buffer(0)
-            return poly if poly.area > 0 else None
-
-        junctions.extend(filter(None, (area(node.getShape()) for node in net.getNodes())))
-        car_lanes = []
-        for e in net.getEdges(withInternal=True):
-            func = e.getFunction()
-            if func == "walkingarea":
-                walks.extend(filter(None, (area(ln.getShape()) for ln in e.getLanes())))
-            elif func == "internal":
-                # junction lanes for cars: drivable even where the junction shape is small
-                for ln in e.getLanes():
-                    shape = ln.getShape()
-                    if ln.allows(PASSENGER) and len(shape) >= 2:
-                        line = LineString([(p[0], p[1]) for p in shape])
-                        if line.length > 1e-6:
-                            car_lanes.append(line.buffer(0.5 * ln.getWidth(), cap_style="flat"))
-        self.walk = unary_union(walks) if walks else None
-        self.drivable = None
-        if junctions and self.walk is not None:
-            # the junction shape minus its walking areas, but every junction lane for cars whole: on
-            # OSM imports a walking area often covers the whole junction of a road that pedestrians
-            # share (a footpath meeting a street), and the cars' own lane through it stays drivable
-            junctions = [unary_union(junctions).difference(self.walk)]
-        self._parts = None  # the drivable area's polygons in an STRtree, for depths (built when first asked)
-        if junctions or car_lanes:
-            self.drivable = unary_union(junctions + car_lanes)
-        self._drivable_tol: dict[float, object] = {}
-
-    def junction_distance(self, x: float, y: float) -> float:
-        """Distance [m] from (x, y) to the drivable junction area (inf beyond ``_REACH`` + 1 m, or none)."""
-        if self.drivable is None:
-            return math.inf
-        import shapely
-
-        if self._parts is None:
-            parts = list(getattr(self.drivable, "geoms", [self.drivable]))
-            self._parts = (parts, shapely.STRtree(parts))
-        parts, tree = self._parts
-        p = shapely.Point(x, y)
-        near = tree.query(p.buffer(_REACH + 1.0))
-        return min((parts[k].distance(p) for k in near.tolist()), default=math.inf)
-
-    def drivable_within(self, tol: float):
-        """The drivable junction area grown by ``tol`` (prepared), or None."""
-        return self._drivable_and_cells(tol)[0]
-
-    def drivable_cells(self, tol: float) -> "_Cells":
-        """The grid cells (closed squares of ``_CELL``) that touch :meth:`drivable_within`: a point in
-        any other cell is certainly outside it, without asking shapely. Each cell is tested when a point
-        first falls in it (a city's bounding box holds a million cells; a run visits a few hundred)."""
-        return self._drivable_and_cells(tol)[1]
-
-    def _drivable_and_cells(self, tol: float):
-        got = self._drivable_tol.get(tol)
-        if got is None:
-            g = None
-            if self.drivable is not None:
-                import shapely
-
-                g = self.drivable.buffer(tol) if tol > 0 else self.drivable
-                shapely.prepare(g)
-            got = (g, _Cells(g))
-            self._drivable_tol[tol] = got
-        return got
-
-    def lanes_at(self, x: float, y: float) -> dict[str, tuple[_Lane, float, float]]:
-        """lane id -> (lane, distance from its centre line, lane heading there) for lanes indexed near (x, y)."""
-        cell = self.grid.get((int(math.floor(x / _CELL)), int(math.floor(y / _CELL))))
-        out: dict[str, tuple[_Lane, float, float]] = {}
-        if not cell:
-            return out
-        for lane, i in cell:
-            d, h = lane.distance(x, y, i, i)
-            if d == math.inf:
-                continue
-            prev = out.get(lane.id)
-            if prev is None or d < prev[1]:
-                out[lane.id] = (lane, d, h)
-        return out
-
-
-class _Cells:
-    """The grid cells that touch an area, found on demand (``cell in cells``) and remembered."""
-
-    def __init__(self, area):
-        self.area = area
-        self.known: dict[tuple[int, int], bool] = {}
-
-    def __contains__(self, cell) -> bool:
-        hit = self.known.get(cell)
-        if hit is None:
-            hit = self.known[cell] = self._touches(cell)
-        return hit
-
-    def _touches(self, cell) -> bool:
-        if self.area is None:
-            return False
-        import shapely
-
-        cx, cy = cell
-        eps = 0.01  # [m] a cell touching the area only within rounding counts as touching
-        return bool(shapely.intersects(self.area, shapely.box(cx * _CELL - eps, cy * _CELL - eps,
-                                                              (cx + 1) * _CELL + eps, (cy + 1) * _CELL + eps)))
-
-
-_INDEX: dict[tuple[str, float], _NetIndex] = {}
-
-
-def _index(rmap) -> _NetIndex:
-    import os
-
-    p = str(rmap.path)
-    key = (p, os.path.getmtime(p))
-    idx = _INDEX.get(key)
-    if idx is None:
-        idx = _INDEX[key] = _NetIndex(rmap)
-    return idx
 
 
 class LaneInvasionOracle(Oracle):
@@ -433,7 +192,7 @@ class LaneInvasionOracle(Oracle):
         self._ref = frozenset(ref)
         against: set[str] = set()
         for e in ref:
-            against |= self._idx.reverse.get(e, frozenset())
+            against |= self._idx.reverse(e)
         self._against = frozenset(against)
 
     def _slow(self, frame: Frame, pts, lane: _Lane | None) -> Sequence[Misbehavior]:
@@ -546,7 +305,7 @@ class LaneInvasionOracle(Oracle):
         """Passenger cars may change from lane ``home_index`` of ``target``'s edge to ``target``."""
         if target.index == home_index:
             return True
-        by_index = self._idx.edge_by_index.get(target.edge, {})
+        by_index = self._idx.by_index(target.edge)
         if target.index > home_index:  # to the left
             return all(by_index[k].change_left for k in range(home_index, target.index) if k in by_index)
         return all(by_index[k].change_right for k in range(target.index + 1, home_index + 1) if k in by_index)

@@ -2,9 +2,17 @@
 
 from __future__ import annotations
 
+import atexit
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
+
+if "DRIVEFUZZ_CACHE" not in os.environ:  # derived network data: not into the user's cache (child processes inherit)
+    os.environ["DRIVEFUZZ_CACHE"] = tempfile.mkdtemp(prefix="drivefuzz-test-cache-")
+    atexit.register(shutil.rmtree, os.environ["DRIVEFUZZ_CACHE"], True)
 
 ROOT = Path(__file__).resolve().parents[1]
 NETWORKS = ROOT / "networks"

@@ -138,19 +138,45 @@ _checked: dict[tuple[str, int, int], str | None] = {}
 
 
 def check_network(path: str | os.PathLike) -> None:
-    """Raise InvalidNetwork for what SUMO would crash on or refuse; once per file version per process."""
+    """Raise InvalidNetwork for what SUMO would crash on or refuse; once per file version per process,
+    and not again in a later process for a file found sound before (:mod:`drivefuzz.netcache`)."""
     p = Path(path).resolve()
     st = p.stat()
     key = (str(p), st.st_mtime_ns, st.st_size)
     if key not in _checked:
         try:
-            _check_network_xml(p)
+            if not _checked_before(p):
+                _check_network_xml(p)
+                _remember_checked(p)
             _checked[key] = None
         except InvalidNetwork as exc:
             _checked[key] = str(exc)
             raise
     if _checked[key] is not None:
         raise InvalidNetwork(str(path), None, _checked[key].split(": ", 1)[-1])
+
+
+def _check_key(p: Path) -> str:
+    from drivefuzz import netcache
+
+    return netcache.entry_key(p, __file__, "network-check")
+
+
+def _checked_before(p: Path) -> bool:
+    """Whether an earlier process found this very file sound with this very module (disk cache)."""
+    from drivefuzz import netcache
+
+    got = netcache.load(_check_key(p))
+    return got is not None and got.get("sound") is not None and got["sound"].shape == () and bool(got["sound"])
+
+
+def _remember_checked(p: Path) -> None:
+    """Only a sound network is remembered: a faulty one is checked again, for its exact error."""
+    import numpy as np
+
+    from drivefuzz import netcache
+
+    netcache.store(_check_key(p), {"sound": np.array(True)})
 
 
 _SIGNALS = set("rRyYgGsuoO")
