@@ -51,14 +51,6 @@ class _Main(click.Group):
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:
-            self._main(args, prog_name, complete_var, **extra)
-        except SystemExit as exc:
-            if args is None and _quick_exit_allowed:  # this process's own command line, ending now
-                _quick_exit(exc.code)
-            raise
-
-    def _main(self, args, prog_name, complete_var, **extra):
-        try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except click.UsageError as exc:
             where = exc.ctx.command_path if exc.ctx is not None else "drivefuzz"
@@ -69,40 +61,6 @@ class _Main(click.Group):
             click.echo("aborted", err=True)
             sys.exit(EXIT_ABORTED)
         sys.exit(rv if isinstance(rv, int) else EXIT_CLEAN)
-
-
-#: Set by the commands after which the process may skip tearing down its objects (see :func:`_quick_exit`).
-_quick_exit_allowed = False
-
-
-def allow_quick_exit() -> None:
-    """This command leaves nothing behind that the interpreter's shutdown must finish for it."""
-    global _quick_exit_allowed
-    _quick_exit_allowed = True
-
-
-def _quick_exit(code) -> None:
-    """End the process with ``code`` after the atexit handlers and flushing stdout and stderr, but
-    without freeing its objects one by one: a city's road map is a graph of a few hundred thousand
-    Python objects, and freeing them (with scipy's and SUMO's) took 0.26 s of the 2 s of a ``drivefuzz
-    run`` on Berlin. Returns (for the normal exit) while another thread or a child process is alive."""
-    import atexit
-    import threading
-
-    mp = sys.modules.get("multiprocessing")
-    if threading.active_count() > 1 or (mp is not None and mp.active_children()):
-        return
-    if code is None:
-        status = 0
-    elif isinstance(code, int):
-        status = code
-    else:
-        return  # a message to print: the normal exit does that
-    atexit._run_exitfuncs()
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(Exception):
-            stream.flush()
-    os._exit(status & 0xFF)
 
 
 class _Seconds(click.ParamType):
@@ -209,7 +167,6 @@ def main() -> None:
 @handle_errors
 def run(scenario, gui, ads_name, ads_option, trace_out, oracle_kv, no_oracle, config_file):
     """Run one SCENARIO (a scenario folder or its scenario.json) and print its outcome."""
-    allow_quick_exit()
     from drivefuzz.ads import check_trusted
     from drivefuzz.errors import InvalidScenario, SimulationError
     from drivefuzz.sim.execute import execute
@@ -283,7 +240,6 @@ def _manifest_of(scenario: str | Path) -> str:
 @handle_errors
 def seed(network, count, out, rng_seed, no_verify, force):
     """Write COUNT seed missions for NETWORK, each verified by a dry run of the reference ADS."""
-    allow_quick_exit()
     from drivefuzz.scenario.seed import generate_seeds
     from drivefuzz.scenario.sumofiles import write_scenario
     from drivefuzz.scenario.validate import load_network
@@ -699,7 +655,6 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
 @handle_errors
 def replay(finding, gui, speed, ads_name):
     """Run a FINDING directory again; 'reproduced' only if the same oracle fires at the same frame."""
-    allow_quick_exit()
     from drivefuzz.sim.execute import execute
     from drivefuzz.sim.simhost import FAILURE_KINDS
 
