@@ -12,10 +12,10 @@ no driver could get out of. After every placement, position, timing or speed cha
   while the ego can still stop before it (careful braking ``EGO_DECEL`` after ``REACTION``);
 - **cut-ins leave room**: a maneuver program's lane change or nudge is triggered by the gap or the headway to
   the ego (or by the clock, with SUMO's own safety gaps), and its gap leaves a careful driver room to react to
-  the closing speed and brake (:func:`drivefuzz.scenario.model.cut_in_gap`; the executor holds back a
-  lane change whose real closing speed needs more); a program's vehicle that starts
-  on a lane beside the ego's is not a follower of the ego, and one that appears ahead of it later needs room
-  only for the speed the ego must shed, not for a full stop;
+  the closing speed and brake (:func:`drivefuzz.scenario.model.cut_in_gap`; the executor holds back a lane
+  change whose real closing speed needs more); a program's vehicle that starts on a lane beside the ego's is
+  not a follower of the ego, and one that appears ahead of it later needs room only for the speed the ego
+  must shed, not for a full stop;
 - **obstacles are not at the start**: an immobile actor stands at least ``MutationConfig.immobile_min_range``
   metres ahead of the ego's start along its route (or behind it);
 - **obstacles leave a way on**: an immobile vehicle on the ego's route (or a walker standing or walking on a
@@ -140,7 +140,7 @@ def _program_unfair(mut: "Mutator", actor: Actor) -> str | None:
     limit = lane_limit(mut, actor.start_lane)
     closing = limit - actor.speed  # the ego at the limit: the most it closes in
     for k, m in enumerate(actor.maneuvers):
-        if m.action in (ManeuverAction.SPEED,):
+        if m.action is ManeuverAction.SPEED:
             continue
         if m.trigger is Trigger.AFTER:
             return f"step {k} ({m.action.value}) is timed by the step before, not by the gap to the ego"

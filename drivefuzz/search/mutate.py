@@ -42,6 +42,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN, RoadMap
 from drivefuzz.search.fairness import lane_limit, unfair
 from drivefuzz.search.placement import RoutePlacement
+from drivefuzz.scenario.model import MAX_NUDGE
 from drivefuzz.scenario import (
     Actor,
     ActorKind,
@@ -499,13 +500,13 @@ class Mutator(RoutePlacement):
                 return m.model_copy(update={"at": round(max(m.at + rng.uniform(-0.5, 0.5), 0.1), 2)})
             return m.model_copy(update={"time": round(max(m.time + rng.uniform(-1.5, 1.5), 0.0), 2)})
         if m.action is ManeuverAction.SPEED:
-            if m.rate > 0.0 and rng.random() < 0.5:
+            if m.rate > 0.0 and rng.random() < 0.5:  # no harder than a car brakes on a dry road (8 m/s^2)
                 return m.model_copy(update={"rate": round(min(max(m.rate * rng.uniform(0.6, 1.4), 0.5), 8.0), 1)})
             limit = lane_limit(self, a.start_lane)
             return m.model_copy(update={"value": round(min(max(m.value * rng.uniform(0.6, 1.4), 0.0),
                                                                1.2 * limit), 2)})
         if m.depth > 0.0 and rng.random() < 0.5:
-            return m.model_copy(update={"depth": round(min(max(m.depth * rng.uniform(0.6, 1.4), 0.3), 2.5), 2)})
+            return m.model_copy(update={"depth": round(min(max(m.depth * rng.uniform(0.6, 1.4), 0.3), MAX_NUDGE), 2)})
         return m.model_copy(update={"value": round(min(max(m.value * rng.uniform(0.6, 1.4), 1.0), 5.0), 2)})
 
     def _replace_actor(self, sc: Scenario, i: int, update: dict, desc: str, retries: int = 0) -> Mutation:
