@@ -29,8 +29,8 @@ import random
 
 from drivefuzz.scenario import Actor, ActorKind, Maneuver, ManeuverAction, NavType, Scenario, Trigger
 from drivefuzz.scenario.roadmap import PASSENGER
-from drivefuzz.search.catalogue import Situation, _dest, _route_spot
 from drivefuzz.scenario.model import cut_in_gap
+from drivefuzz.search.catalogue import Situation, _dest, _route_spot
 from drivefuzz.search.fairness import lane_limit
 from drivefuzz.search.mutate import Mutator
 
@@ -54,10 +54,6 @@ def _toward(from_lane, to_lane) -> tuple[ManeuverAction, ManeuverAction]:
     if to_lane.getIndex() > from_lane.getIndex():
         return ManeuverAction.LANE_LEFT, ManeuverAction.NUDGE_LEFT
     return ManeuverAction.LANE_RIGHT, ManeuverAction.NUDGE_RIGHT
-
-
-def _speed(mut: Mutator, lane_id: str, rng: random.Random, lo: float, hi: float) -> float:
-    return round(lane_limit(mut, lane_id) * rng.uniform(lo, hi), 2)
 
 
 def _leader_speed(mut: Mutator, lane_id: str, rng: random.Random, lo: float, hi: float, v_ego: float) -> float:
