@@ -20,7 +20,7 @@ import inspect
 import os
 import sys
 from dataclasses import dataclass, field
-from importlib.metadata import entry_points
+from drivefuzz.entrypoints import entry_points
 from typing import Any, ClassVar, Mapping, NamedTuple
 
 from pydantic import BaseModel, ConfigDict, ValidationError

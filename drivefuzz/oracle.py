@@ -17,7 +17,7 @@ from __future__ import annotations
 import abc
 from dataclasses import dataclass, field
 from enum import Enum
-from importlib.metadata import entry_points
+from drivefuzz.entrypoints import entry_points
 from typing import Any, ClassVar, Mapping, Sequence
 
 import numpy as np
