@@ -133,7 +133,7 @@ def main() -> None:
     for k in stages[0]:
         print(f"  {k:<10} {min(s[k] for s in stages):.3f} s")
     print(f"  {'rest':<10} {min(w - sum(t.values()) for w, t in zip(full, stages)):.3f} s"
-          "  (close SUMO, remove the work folder)")
+          "  (the work folder removed, the result returned)")
 
 
 if __name__ == "__main__":

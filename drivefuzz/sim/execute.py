@@ -33,7 +33,7 @@ Linear and immobile pedestrians are placed by the executor (``person.moveToXY``)
 every step; their recorded speed is the walked one. An exception in plugin code
 (ADS or oracle) leaves :func:`execute` as a :class:`~drivefuzz.errors.PluginError`
 naming the plugin. ``Execution.timings``: seconds per stage, ``setup``, ``sumo``
-(steps 9-10), ``world`` (1), ``record`` (2), ``oracles`` (3), ``observe`` (5),
+(steps 9-10, and SUMO's own start and close), ``world`` (1), ``record`` (2), ``oracles`` (3), ``observe`` (5),
 ``ads`` (6), ``physics`` (7-8); ``tools/bench_exec.py`` prints them.
 """
 
@@ -179,10 +179,12 @@ def execute(
             import traci as sim  # the GUI needs a traci connection; same API as libsumo
         else:
             import libsumo as sim
+        t_start = time.perf_counter()
         try:
             sim.start(_sumo_args(scenario, folder, net, gui))
         except Exception as exc:  # TraCIException cannot be pickled: re-raise plainly
             raise SimulationError(f"SUMO failed to start on {folder}: {type(exc).__name__}: {exc}") from None
+        t_start = time.perf_counter() - t_start
         try:
             if view is not None:
                 view.start(sim)
@@ -190,13 +192,18 @@ def execute(
             if view is not None:
                 view.end(sim, result.misbehaviors)
         finally:
+            t_close = time.perf_counter()
             try:
                 sim.close()
             except Exception:  # noqa: BLE001 - closing a dead connection must not hide the real error
                 pass
+            t_close = time.perf_counter() - t_close
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
+    # SUMO's own start (loading the network and the files) and close are SUMO's time, not the setup's
+    result.timings["sumo"] += t_start + t_close
+    result.timings["setup"] -= t_start
     return dataclasses.replace(result, wall_time=time.perf_counter() - wall0)
 
 
