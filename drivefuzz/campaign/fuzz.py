@@ -440,6 +440,8 @@ def open_index(path: Path) -> sqlite3.Connection:
             if path.is_dir():
                 raise sqlite3.DatabaseError("a folder, not a database")
             db = sqlite3.connect(path)
+            # rebuilt from the journals at every start: a commit need not wait for the disk (fsync)
+            db.execute("PRAGMA synchronous=OFF")
             db.executescript("DROP TABLE IF EXISTS executions;" + SCHEMA)
             return db
         except sqlite3.DatabaseError as exc:
