@@ -193,6 +193,8 @@ class SeedJob:
         ckpt = json.loads(ckpt_path.read_text()) if ckpt_path.exists() else {}
         schedule = Schedule.from_json(cfg.schedule, ckpt.get("schedule"), cfg.feedback)
         runner = _Runner(cfg)
+        if runner.host is not None:
+            _warm_up()
         store = FindingStore(self.out, mutator.rmap, runner.misbehaviors,
                              TriageConfig(reproduce=cfg.reproduce, shrink=cfg.shrink),
                              {"oracles": cfg.oracles.settings, "exec_timeout_s": cfg.exec_timeout_s})
@@ -344,6 +346,28 @@ def _baseline(detail: dict[str, Any] | None):
     from drivefuzz.search.risk import RiskScore
 
     return None if detail is None else RiskScore.from_dict(detail)
+
+
+_WARMED = False
+
+
+def _warm_up() -> None:
+    """Import scipy.signal (the driving-quality score's filters: 0.4 s, once per process) on a thread of its
+    own while the first executions run in the simulation host: this process only waits on the host then, so
+    the import costs a short campaign no wall time instead of delaying the first score."""
+    global _WARMED
+    if _WARMED:
+        return
+    _WARMED = True
+    import threading
+
+    def work() -> None:
+        try:
+            import scipy.signal  # noqa: F401
+        except Exception:  # noqa: BLE001 - the score imports it again and reports what is wrong
+            pass
+
+    threading.Thread(target=work, name="drivefuzz-warm-up", daemon=True).start()
 
 
 _HOSTS: dict[int, Any] = {}  # one simulation host per thread of this process, kept between jobs
