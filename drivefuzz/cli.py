@@ -157,20 +157,41 @@ def main() -> None:
 
 
 # ----------------------------------------------------------------------------- run
+def _risk_line(trace) -> str:
+    """'risk 0.42: time-to-collision 1.9 s with v3 at t=12.3 s, gap 0.8 m with p0, ...' (absolute: no baseline)."""
+    from drivefuzz.search.risk import risk_score
+
+    r = risk_score(trace)
+    t = trace["t"]
+    parts = []
+    for name, value, unit, frame, actor in (("time-to-collision", r.ttc, "s", r.ttc_frame, r.ttc_actor),
+                                             ("gap", r.gap, "m", r.gap_frame, r.gap_actor),
+                                             ("post-encroachment time", r.pet, "s", r.pet_frame, r.pet_actor)):
+        if value is not None:
+            parts.append(f"{name} {value:.2f} {unit}" + (f" with {actor}" if actor else "")
+                         + (f" at t={float(t[frame]):.1f} s" if frame is not None else ""))
+    parts.append(f"grip use {r.grip:.2f}")
+    return f"risk {r.score:.2f} (the default feedback, without a baseline): " + ", ".join(parts)
+
+
 @main.command()
 @click.argument("scenario", type=click.Path())
 @click.option("--gui", is_flag=True, help="Show the run in sumo-gui (through traci; same code path).")
 @click.option("--ads", "ads_name", default=None, callback=_ads_from_the_command_line, help="ADS plugin (default: the scenario's).")
 @click.option("--ads-option", multiple=True, metavar="K=V", help="ADS option, e.g. fault=speeding.")
 @click.option("--trace", "trace_out", type=click.Path(file_okay=False), help="Save the trace (Parquet) here.")
+@click.option("--quality", "show_quality", is_flag=True,
+              help="Also print the paper's driving-quality score (what --feedback paper uses).")
 @oracle_options
 @handle_errors
-def run(scenario, gui, ads_name, ads_option, trace_out, oracle_kv, no_oracle, config_file):
-    """Run one SCENARIO (a scenario folder or its scenario.json) and print its outcome."""
+def run(scenario, gui, ads_name, ads_option, trace_out, show_quality, oracle_kv, no_oracle, config_file):
+    """Run one SCENARIO (a scenario folder or its scenario.json) and print its outcome.
+
+    A run without misbehaviour prints how close it came: its risk (what the fuzzer's default feedback
+    maximises, docs/feedback.md) with its nearest time-to-collision, gap and crossing."""
     from drivefuzz.ads import check_trusted
     from drivefuzz.errors import InvalidScenario, SimulationError
     from drivefuzz.sim.execute import execute
-    from drivefuzz.search.quality import score_trace
     from drivefuzz.scenario import AdsSpec
     from drivefuzz.scenario.sumofiles import load_scenario
 
@@ -204,8 +225,12 @@ def run(scenario, gui, ads_name, ads_option, trace_out, oracle_kv, no_oracle, co
         click.echo(f"  MISBEHAVIOR {m.oracle}/{m.kind} at frame {m.frame} (t={m.time:.2f} s)"
                    f"{' with ' + ', '.join(m.actors) if m.actors else ''}")
     if not ex.misbehaviors:
-        q = score_trace(ex.trace)
-        click.echo(f"  quality score {q.score:.2f} ({json.dumps({k: v for k, v in q.as_dict().items() if k in ('ha', 'hb', 'ht', 'os', 'us', 'md')})})")
+        click.echo(f"  {_risk_line(ex.trace)}")
+        if show_quality:  # scipy's filters: 0.4 s to import, so only when asked
+            from drivefuzz.search.quality import score_trace
+
+            q = score_trace(ex.trace)
+            click.echo(f"  quality score {q.score:.2f} ({json.dumps({k: v for k, v in q.as_dict().items() if k in ('ha', 'hb', 'ht', 'os', 'us', 'md')})})")
     if trace_out:
         try:
             ex.trace.save(trace_out)

@@ -232,3 +232,27 @@ def test_real_run_clean_is_small_and_a_car_ahead_raises_it(seed):
     assert r.riskiest_actor == "slow" and r.ttc_actor == "slow"
     assert r.gap is not None and r.ttc is not None
     assert r.score > 0.1 and r.score > risk_score(clean, baseline=base).score
+
+
+def test_run_prints_a_passing_runs_risk_and_the_quality_score_only_on_request(seed, tmp_path):
+    """`drivefuzz run` of a run without misbehaviour: the risk line names the nearest time-to-collision and gap
+    and their actor; the paper's quality score (scipy's filters, 0.4 s to import) only with --quality."""
+    from click.testing import CliRunner
+
+    from drivefuzz.cli import main
+    from drivefuzz.scenario import Actor
+    from drivefuzz.scenario.sumofiles import write_scenario
+
+    slow = Actor(id="slow", kind="vehicle", nav="immobile", start_lane=seed.mission.start_lane,
+                 start_pos=seed.mission.start_pos + 35.0, speed=0.0)
+    write_scenario(seed.model_copy(update={"actors": (slow,), "sim": seed.sim.model_copy(update={"time_limit": 20.0})}),
+                   tmp_path / "s")
+    args = ["run", str(tmp_path / "s"), "--no-oracle", "mission", "--no-oracle", "immobility"]
+    r = CliRunner().invoke(main, args)
+    assert r.exit_code == 0, r.output
+    line = next(l for l in r.output.splitlines() if l.strip().startswith("risk "))
+    assert float(line.split()[1]) > 0.1
+    assert "time-to-collision" in line and "gap" in line and "with slow" in line
+    assert "quality score" not in r.output
+    r = CliRunner().invoke(main, args + ["--quality"])
+    assert r.exit_code == 0 and "quality score" in r.output, r.output

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import bisect
 import functools
+import gc
 import math
 import os
 import xml.etree.ElementTree as ET
@@ -106,6 +107,11 @@ class RoadMap:
             raise InvalidNetwork(str(path), None, "no such network file", "a SUMO .net.xml file")
         import sumolib
 
+        # The cyclic garbage collector is off while sumolib builds the network: the parse allocates hundreds of
+        # thousands of objects that all stay alive, so the collections it would trigger find nothing and cost
+        # a third of the load (Berlin, 3,641 edges: 0.40 -> 0.25 s)
+        collecting = gc.isenabled()
+        gc.disable()
         try:
             # lxml=False: sumolib's lxml reader (taken whenever lxml is installed, as scenariogeneration
             # brings it) leaves crossings without their crossed edges; the SAX reader is what we test
@@ -114,6 +120,9 @@ class RoadMap:
         except (xml.sax.SAXException, ValueError, KeyError, AttributeError, IndexError, TypeError) as exc:
             raise InvalidNetwork(str(path), None, f"not a readable SUMO network ({type(exc).__name__}: {exc})",
                                  "a .net.xml written by netconvert") from None
+        finally:
+            if collecting:
+                gc.enable()
         if not self.net.getEdges(withInternal=False):
             raise InvalidNetwork(str(path), None, "the network has no edges", "a .net.xml with roads")
         self._geoms: dict[str, LaneGeom] = {}
