@@ -34,6 +34,25 @@ def test_malformed_network(tmp_path):
     _one_line_error(*_invoke(["seed", str(bad), "-n", "1"]), "bad.net.xml", "not a readable SUMO network")
 
 
+def test_a_failed_network_parse_turns_the_garbage_collector_back_on(tmp_path):
+    """The road map parses with the cyclic GC off (drivefuzz.scenario.roadmap); an error must not leave it off."""
+    import gc
+
+    import pytest
+
+    from drivefuzz.errors import InvalidNetwork
+    from drivefuzz.scenario.roadmap import RoadMap
+
+    bad = tmp_path / "bad.net.xml"
+    bad.write_text("<net><edge id='x'")
+    assert gc.isenabled()
+    with pytest.raises(InvalidNetwork):
+        RoadMap(bad)
+    assert gc.isenabled()
+    RoadMap(TOWN)
+    assert gc.isenabled()
+
+
 def test_scenario_with_missing_edge(tmp_path, town_scenario):
     write_scenario(town_scenario, tmp_path / "s")
     routes = tmp_path / "s" / "routes.rou.xml"
