@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from drivefuzz.ads import Control
 from drivefuzz.oracle import Misbehavior
 from drivefuzz.scenario import Actor, AdsSpec, Maneuver, Mission, Scenario, SimOptions
 from drivefuzz.scenario.roadmap import load_roadmap
@@ -245,6 +246,29 @@ def test_rear_ending_a_braking_car_is_ego():
     assert "a careful driver avoided it" in v.reason
 
 
+class CreepADS(ReferenceADS):
+    """Holds 0.09 m/s: the car creeps forward below the stationary speed (0.1 m/s) into whatever is ahead, as the
+    reference ADS's throttle-brake chatter did behind a parked car in a campaign."""
+
+    def step(self, obs):
+        v = obs.ego.speed
+        return Control(throttle=min(1.0, 2.0 * (0.09 - v))) if v < 0.09 else Control(brake=0.2)
+
+
+def test_creeping_into_a_body_that_stands_still_is_ego():
+    """The stationary rule excuses an ego struck by a body that came to it (test_rear_ended_while_stopped_is_other);
+    an ego that crept into a body standing still struck it (a campaign filed such an event as an incident: 'the
+    ego was stationary (0.02 m/s) when the vehicle v3 struck its front', v3 parked the whole time)."""
+    parked = Actor(id="v2", kind="vehicle", nav="immobile", start_lane="A0B0_1", start_pos=36.0, speed=0.0)
+    sc = scenario("A0B0_1", 30.0, "B0C0", 60.0, parked, time_limit=20.0)
+    ex = execute(sc, ads=CreepADS(), oracles=[CollisionOracle()])  # the immobility oracle would fire first
+    m = ex.misbehaviors[0]
+    v = attribute(sc, ex.trace, m, load_roadmap(NET))
+    assert (m.oracle, m.actors) == ("collision", ("v2",))
+    assert v.evidence["ego_speed"] < 0.1 and v.evidence["other_speed"] == 0.0
+    assert v.fault is Fault.EGO and "struck the stationary vehicle v2 with its front" in v.reason, v.reason
+
+
 def test_driving_into_a_parked_car_is_ego():
     parked = Actor(id="v2", kind="vehicle", nav="immobile", start_lane="A0B0_1", start_pos=60.0, speed=0.0)
     m, v = judge(scenario("A0B0_1", 10.0, "B0C0", 60.0, parked), ads=BlindADS())
@@ -413,3 +437,32 @@ def test_a_repeat_of_an_event_the_counterfactual_excused_runs_no_replay_again(tm
     again = store.triage(sc, list(ex.misbehaviors), ex.trace, "0/0/0/1", "collision")
     assert (again.rel, again.new, again.executions, again.fault) == (first.rel, False, 0, "other")
     assert runs == ["careful"]
+
+
+def test_a_car_standing_in_the_junction_that_the_ego_creeps_into_is_the_egos(tmp_path):
+    """A campaign's incident, kept as data (tests/data/creep_into_junction_car): v3 ran the red at B1 and stands
+    in the junction, angled; the reference ADS waits at the stop line and its throttle-brake chatter creeps it
+    8 cm in 8 s into v3's corner. Filed as 'the ego was stationary (0.02 m/s) when v3 struck its front', and
+    without the stationary rule as 'v3 entered junction B1 on red and struck the ego's front'. v3 stood still;
+    the ego came to it, and the careful driver, waiting at the same line, does not touch it."""
+    import shutil
+
+    from drivefuzz.oracle import OracleSettings
+    from drivefuzz.scenario.sumofiles import load_scenario
+
+    folder = tmp_path / "incident"
+    shutil.copytree(Path(__file__).parent / "data" / "creep_into_junction_car", folder)
+    shutil.copy(NET, folder / "town.net.xml")
+    sc = load_scenario(folder)
+    ex = execute(sc, oracles=OracleSettings().instantiate())
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.kind, m.actors, m.frame) == ("collision", "vehicle", ("v3",), 1266)
+
+    def careful(s):
+        again = execute(s, oracles=OracleSettings().instantiate())
+        return again.misbehaviors, again.trace
+
+    v = attribute(sc, ex.trace, m, load_roadmap(NET), replay=careful)
+    assert v.evidence["other_travelled"] == 0.0 < v.evidence["ego_travelled"] < 0.1, v.evidence
+    assert v.fault is Fault.EGO, v.reason
+    assert "struck the stationary vehicle v3 with its front" in v.reason and "careful driver avoided" in v.reason

@@ -28,6 +28,11 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
      of the run held up behind slower traffic. Waiting behind a stationary body with a lawful lane
      free is the ego's (decided: the careful driver does not overtake either).
 
+  Rules 1-3 excuse the ego only for a body that came to it: one that moved in the last
+  :data:`APPROACH_WINDOW` seconds (farther than the stationary speed takes a body, or farther than
+  the ego). An ego that crept (below the stationary speed) into a parked car, or drove into a car
+  that stood in a junction it had entered on red, struck it.
+
 - **Avoidability by counterfactual replay**: when no rule excuses the ego and the caller gives
   ``replay``, the same scenario is driven by the careful reference driver (ADS ``careful``,
   :mod:`ego.careful`). If it fails the same way (same oracle, same other party), the situation
@@ -75,6 +80,17 @@ from drivefuzz.triage.evidence import (
     to_local,
     wrap_angle,
 )
+
+#: [s] before a contact, over which the stationary rule compares how far the ego and the other travelled.
+APPROACH_WINDOW = 2.0
+
+
+def _travelled(x: np.ndarray, y: np.ndarray) -> float:
+    """Path length [m] of a body's positions (frames where it was absent are skipped)."""
+    keep = ~(np.isnan(x) | np.isnan(y))
+    x, y = x[keep], y[keep]
+    return float(np.hypot(np.diff(x), np.diff(y)).sum()) if len(x) > 1 else 0.0
+
 
 #: Oracles whose verdicts the counterfactual does not settle (see :func:`attribute`).
 NO_COUNTERFACTUAL = frozenset({"lane_invasion", "immobility", "mission"})
@@ -263,14 +279,35 @@ class _Event:
         return self.ego(f"the ego struck the {what} {oth.id} with its {side} at {self.v:.1f} m/s")
 
     def rule_stationary(self, oth: Track, point, side: str, red) -> Attribution | None:
-        w = frames_before(self.trace, self.f, 0.5)
-        if float(np.max(self.trace["speed"][w])) > STATIONARY_SPEED or red is not None or not self.trace["lane"][self.f]:
+        trace, f = self.trace, self.f
+        w = frames_before(trace, f, 0.5)
+        if float(np.max(trace["speed"][w])) > STATIONARY_SPEED or red is not None or not trace["lane"][f]:
+            return None
+        # an ego creeping below the stationary speed into a body that stood still (a waiting car's throttle-brake
+        # chatter) struck it, whatever its speedometer said
+        if not self._came_to_ego(oth):
             return None
         return self.other(f"the ego was stationary ({self.v:.2f} m/s) when the {oth.kind} {oth.id} struck its {side}")
+
+    def _came_to_ego(self, oth: Track) -> bool:
+        """Whether the other body moved in the last :data:`APPROACH_WINDOW` seconds: farther than the
+        stationary speed would take it, or farther than the ego (the distances go into the evidence). Its path,
+        not its speed: SUMO's speed is longitudinal, and a car that swings sideways into the next lane at a
+        standstill reports 0. The rules that excuse the ego because the other struck it (stationary, rear,
+        right of way) need it: a body that stood still while the ego moved to it was the ego's to avoid, even
+        one that had stopped where it should not (the counterfactual still decides whether a careful driver
+        could)."""
+        w = frames_before(self.trace, self.f, APPROACH_WINDOW)
+        ego_moved = _travelled(self.trace["x"][w], self.trace["y"][w])
+        other_moved = _travelled(oth.x[w], oth.y[w])
+        self.base.update(ego_travelled=round(ego_moved, 3), other_travelled=round(other_moved, 3))
+        return other_moved > STATIONARY_SPEED * APPROACH_WINDOW or other_moved > ego_moved
 
     def rule_rear(self, oth: Track, point, side: str, red) -> Attribution | None:
         trace, f = self.trace, self.f
         if oth.kind != "vehicle" or point is None or point[0] >= 0.0 or side in ("front",):
+            return None
+        if not self._came_to_ego(oth):
             return None
         if red is not None or not trace["lane"][f] or lane_changed(trace, f):
             return None
@@ -325,7 +362,7 @@ class _Event:
         return None
 
     def rule_right_of_way(self, oth: Track, point, side: str, red) -> Attribution | None:
-        if oth.kind != "vehicle" or red is not None:
+        if oth.kind != "vehicle" or red is not None or not self._came_to_ego(oth):
             return None
         link = other_link(self.trace, self.rmap, oth, self.f)
         if link is None:
