@@ -81,7 +81,7 @@ from drivefuzz.triage.evidence import (
     wrap_angle,
 )
 
-#: [s] before a contact, over which the stationary rule compares how far the ego and the other travelled.
+#: [s] before a contact, over which the rules that excuse a struck ego look for the other body's approach.
 APPROACH_WINDOW = 2.0
 
 
