@@ -440,11 +440,12 @@ def test_a_repeat_of_an_event_the_counterfactual_excused_runs_no_replay_again(tm
 
 
 def test_a_car_standing_in_the_junction_that_the_ego_creeps_into_is_the_egos(tmp_path):
-    """A campaign's incident, kept as data (tests/data/creep_into_junction_car): v3 ran the red at B1 and stands
-    in the junction, angled; the reference ADS waits at the stop line and its throttle-brake chatter creeps it
-    8 cm in 8 s into v3's corner. Filed as 'the ego was stationary (0.02 m/s) when v3 struck its front', and
-    without the stationary rule as 'v3 entered junction B1 on red and struck the ego's front'. v3 stood still;
-    the ego came to it, and the careful driver, waiting at the same line, does not touch it."""
+    """A campaign's incident, kept as data (tests/data/creep_into_junction_car): v3 turned into junction B1 on
+    green and stopped there at 6.5 s, angled; the reference ADS waits at the red stop line and its throttle-brake
+    chatter creeps it 8 cm in 8 s into v3's corner at 63.3 s. Filed as 'the ego was stationary (0.02 m/s) when
+    v3 struck its front', and without the stationary rule as 'v3 entered junction B1 on red ('r' at 63.3 s)'
+    (v3's entry read at the contact). v3 stood still for 57 s; the ego came to it, and the careful driver,
+    waiting at the same line, does not touch it."""
     import shutil
 
     from drivefuzz.oracle import OracleSettings
