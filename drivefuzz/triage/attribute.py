@@ -215,6 +215,7 @@ class _Event:
         #: an ``ego`` verdict from a rule that saw the ego's own fault (the careful driver would
         #: share it or never meet it): no counterfactual
         self.decided = False
+        self._came: dict[str, bool] = {}  # other body id -> whether it came to the ego (_came_to_ego)
         #: a verdict of an oracle in NO_COUNTERFACTUAL that the replay may still settle
         self.replay_may_settle = False
         self.v = float(trace["speed"][f])
@@ -297,11 +298,14 @@ class _Event:
         right of way) need it: a body that stood still while the ego moved to it was the ego's to avoid, even
         one that had stopped where it should not (the counterfactual still decides whether a careful driver
         could)."""
-        w = frames_before(self.trace, self.f, APPROACH_WINDOW)
-        ego_moved = _travelled(self.trace["x"][w], self.trace["y"][w])
-        other_moved = _travelled(oth.x[w], oth.y[w])
-        self.base.update(ego_travelled=round(ego_moved, 3), other_travelled=round(other_moved, 3))
-        return other_moved > STATIONARY_SPEED * APPROACH_WINDOW or other_moved > ego_moved
+        came = self._came.get(oth.id)
+        if came is None:  # three rules ask: measured once
+            w = frames_before(self.trace, self.f, APPROACH_WINDOW)
+            ego_moved = _travelled(self.trace["x"][w], self.trace["y"][w])
+            other_moved = _travelled(oth.x[w], oth.y[w])
+            self.base.update(ego_travelled=round(ego_moved, 3), other_travelled=round(other_moved, 3))
+            came = self._came[oth.id] = other_moved > STATIONARY_SPEED * APPROACH_WINDOW or other_moved > ego_moved
+        return came
 
     def rule_rear(self, oth: Track, point, side: str, red) -> Attribution | None:
         trace, f = self.trace, self.f
