@@ -22,6 +22,7 @@ from drivefuzz.scenario import Actor, AdsSpec, Maneuver, Mission, Scenario, SimO
 from drivefuzz.scenario.roadmap import load_roadmap
 from drivefuzz.sim.execute import execute
 from drivefuzz.triage.attribute import Attribution, Fault, attribute, counterfactual, signal_state
+from drivefuzz.triage.evidence import actor_track, other_link
 from ego.ads import ReferenceADS
 from oracles.collision import CollisionOracle
 from oracles.immobility import ImmobilityOracle
@@ -463,7 +464,14 @@ def test_a_car_standing_in_the_junction_that_the_ego_creeps_into_is_the_egos(tmp
         again = execute(s, oracles=OracleSettings().instantiate())
         return again.misbehaviors, again.trace
 
-    v = attribute(sc, ex.trace, m, load_roadmap(NET), replay=careful)
+    rmap = load_roadmap(NET)
+    # v3 crossed A1B1_2's stop line at 6.25 s, on green, and has stood across it since: that is its entry,
+    # not the contact 57 s later (the red that the right-of-way rule once read)
+    conn, k_in = other_link(ex.trace, rmap, actor_track(ex.trace, "v3"), m.frame)
+    assert (conn.getFromLane().getID(), k_in) == ("A1B1_2", 125)
+    assert signal_state(str(NET), conn.getTLSID(), conn.getTLLinkIndex(), float(ex.trace["t"][k_in])) in ("g", "G")
+    assert signal_state(str(NET), conn.getTLSID(), conn.getTLLinkIndex(), float(ex.trace["t"][m.frame])) == "r"
+    v = attribute(sc, ex.trace, m, rmap, replay=careful)
     assert v.evidence["other_travelled"] == 0.0 < v.evidence["ego_travelled"] < 0.1, v.evidence
     assert v.fault is Fault.EGO, v.reason
     assert "struck the stationary vehicle v3 with its front" in v.reason and "careful driver avoided" in v.reason

@@ -215,16 +215,21 @@ def other_link(trace, rmap, oth: Track, f: int, seconds: float = 10.0):
     if not conns:
         return None
     g = rmap.geom(lane_in)
-    # the frame its front crossed the end of the lane (the stop line)
-    k_in = None
-    for k in frames:
-        if k < k_last:
-            continue
+
+    def past_line(k: int) -> bool:  # its front beyond the end of the lane (the stop line)
         fx = oth.x[k] + math.cos(oth.heading[k]) * oth.length / 2
         fy = oth.y[k] + math.sin(oth.heading[k]) * oth.length / 2
-        if g.project(float(fx), float(fy))[0] >= g.length - 0.2:
-            k_in = k
-            break
+        return g.project(float(fx), float(fy))[0] >= g.length - 0.2
+
+    # the frame its front crossed the stop line: after k_last if it was still short of it then, else the
+    # start of the run of frames it has stood past it, however long before the window that began (a car
+    # that stopped across the line a minute ago entered then, not at the contact)
+    if past_line(k_last):
+        k_in = k_last
+        while oth.present(k_in - 1) and past_line(k_in - 1):
+            k_in -= 1
+    else:
+        k_in = next((k for k in frames if k > k_last and past_line(k)), None)
     if k_in is None:
         return None  # it had not reached the junction
     after = [k for k in frames if k >= k_in]
