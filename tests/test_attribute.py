@@ -23,6 +23,7 @@ from drivefuzz.scenario.roadmap import load_roadmap
 from drivefuzz.sim.execute import execute
 from drivefuzz.triage.attribute import Attribution, Fault, attribute, counterfactual, signal_state
 from drivefuzz.triage.evidence import actor_track, other_link
+from drivefuzz.triage.signature import signature
 from ego.ads import ReferenceADS
 from oracles.collision import CollisionOracle
 from oracles.immobility import ImmobilityOracle
@@ -199,17 +200,58 @@ def test_a_queue_on_a_lane_that_does_not_lead_on_does_not_excuse_a_standstill():
     assert v.fault is Fault.EGO and "behind the stationary v2" in v.reason, v.reason
 
 
-def test_queue_behind_a_blocked_queue_is_other():
-    # a car stopped behind a broken-down car: the ego waits behind a queue that cannot move
+def test_a_queue_behind_a_broken_down_car_with_a_lane_free_is_ego():
+    """A car stopped behind a broken-down car, and the ego behind it, with A0B0_2 free: the queue will
+    never move (a parked car heads it), so the ego's wait is the same bug as waiting right behind the
+    wreck; the signature names the wreck, as it would without the car between."""
     actors = [Actor(id="wreck", kind="vehicle", nav="immobile", start_lane="A0B0_1", start_pos=80.0, speed=0.0),
               Actor(id="queued", kind="vehicle", nav="maneuver", start_lane="A0B0_1", start_pos=50.0, speed=5.0,
                     dest_edge="B0C0", maneuvers=(Maneuver(time=0.0, action="speed", value=5.0),))]
     sc = scenario("A0B0_1", 10.0, "B0C0", 40.0, *actors)
     ex = execute(sc, oracles=oracles())
     (m,) = [m for m in ex.misbehaviors if m.oracle == "immobility"]
+    rmap = load_roadmap(NET)
+    v = attribute(sc, ex.trace, m, rmap)
+    assert v.fault is Fault.EGO, v.reason
+    assert "behind the stationary queued in a queue that the parked wreck holds up" in v.reason
+    assert "A0B0_2 was free" in v.reason
+    assert v.evidence["blocker"] == "wreck" and v.evidence["lanes"] == {"A0B0_1": "queued"}
+    sig = signature(sc, ex.trace, m, rmap, v)
+    assert (sig.other_nav, sig.approach) == ("immobile", "ahead")
+
+
+def test_a_queue_whose_head_waits_at_the_lane_end_is_other():
+    """A car stops at the end of A0B0_1 (it waits at junction B0) and the ego behind it: waiting in a queue
+    for a junction is lawful, though A0B0_2 is free."""
+    v0 = Actor(id="v0", kind="vehicle", nav="maneuver", start_lane="A0B0_1", start_pos=80.0, speed=5.0,
+               dest_edge="B0C0", maneuvers=(Maneuver(time=5.6, action="speed", value=0.0),))
+    m, v = judge(scenario("A0B0_1", 10.0, "B0C0", 40.0, v0))
+    assert m.oracle == "immobility"
+    assert v.fault is Fault.OTHER and v.reason == "the ego waits in a queue for the junction: v0 waits at the end " \
+        "of A0B0_1", v.reason
+
+
+def test_a_queue_held_up_across_a_junction_by_parked_cars_is_ego(tmp_path):
+    """A campaign's incident, kept as data (tests/data/queue_behind_parked_cars): v4 waits at the end of
+    B2M2_2 for room beyond junction M2, where v2 stands behind the parked v3 and v0 on M2C2_2; the ego stands
+    behind v4 for 60 s with B2M2_1 free. Filed as 'the queue ahead is itself blocked': the queue is followed
+    across the junction to the parked car at its head."""
+    import shutil
+
+    from drivefuzz.oracle import OracleSettings
+    from drivefuzz.scenario.sumofiles import load_scenario
+
+    folder = tmp_path / "incident"
+    shutil.copytree(Path(__file__).parent / "data" / "queue_behind_parked_cars", folder)
+    shutil.copy(NET, folder / "town.net.xml")
+    sc = load_scenario(folder)
+    ex = execute(sc, oracles=OracleSettings().instantiate())
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.kind, m.frame) == ("immobility", "immobile", 1347)
     v = attribute(sc, ex.trace, m, load_roadmap(NET))
-    assert v.fault is Fault.OTHER and "queue ahead is itself blocked" in v.reason
-    assert "queued" in v.evidence["queue"] and "wreck" in v.evidence["queue"]
+    assert v.fault is Fault.EGO, v.reason
+    assert v.reason == ("the ego stayed behind the stationary v4 in a queue that the parked v0 holds up, although "
+                        "B2M2_1 was free")
 
 
 def test_changing_lanes_into_a_car_alongside_is_ego():

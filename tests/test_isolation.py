@@ -141,8 +141,8 @@ def test_a_crashed_host_leaves_no_temporary_folder(town_scenario):
     import glob
     import tempfile
 
-    def leftovers():
-        return set(glob.glob(os.path.join(tempfile.gettempdir(), "drivefuzz-host-*")))
+    def leftovers():  # this process's hosts only: other test workers start hosts of their own meanwhile
+        return set(glob.glob(os.path.join(tempfile.gettempdir(), f"drivefuzz-host-{os.getpid()}-*")))
 
     before = leftovers()
     with SimHost(timeout_s=60) as host:

@@ -24,9 +24,11 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
      line of sight past other vehicles);
   5. *blocked* (immobility and mission): every lane the ego may lawfully use is blocked ahead by a
      stationary body (in a junction: the body right ahead), a pedestrian stands in its lane ahead,
-     or the queue ahead of the ego is itself blocked; a mission time-out while the ego spent most
-     of the run held up behind slower traffic. Waiting behind a stationary body with a lawful lane
-     free is the ego's (decided: the careful driver does not overtake either).
+     or the ego waits in a queue for a junction (its head has moved and waits at the end of its lane
+     or in the junction); a mission time-out while the ego spent most of the run held up behind
+     slower traffic. Waiting behind a stationary body with a lawful lane free is the ego's (decided:
+     the careful driver does not overtake either), also when cars queue between the ego and that
+     body (a parked car, or one stalled in mid-lane, heads the queue: it will not move).
 
   Rules 1-3 excuse the ego only for a body that came to it: one that moved in the last
   :data:`APPROACH_WINDOW` seconds (farther than the stationary speed takes a body, or farther than
@@ -486,7 +488,7 @@ class _Event:
         if blocked is None:
             self.replay_may_settle = True  # the rules may have missed a blocker (mid-turn in a junction)
             return self.ego(f"the ego stood still with nothing blocking its way ({self.mb.oracle}/{self.mb.kind})")
-        lanes, free, queue = blocked
+        lanes, free, queue, root = blocked
         leads = self._leads()
         passable = self._room_to_pass(lanes, leads)
         lanes = {l: b for l, b in lanes.items() if l not in passable}
@@ -499,9 +501,15 @@ class _Event:
             what = ", ".join(f"{l} by {b}" for l, b in lanes.items())
             return self.other(f"every lawful way forward is blocked by stationary bodies: {what}", **ev)
         if queue is not None and (leads is None or str(trace["lane"][f]) in leads):  # a queue on the way on
-            return self.other(f"the queue ahead is itself blocked: {queue}", queue=queue, **ev)
+            return self.other(f"the ego waits in a queue for the junction: {queue}", queue=queue, **ev)
         behind = own or next(iter(lanes.values()), None)  # mid-lane-change: the blocker of the lane it wants
         if behind is not None:
+            if root is not None and own is not None:  # a queue that will not move: the blocker is its head
+                head = actor_track(trace, root)
+                how = "parked" if float(np.nanmax(head.speed[: f + 1], initial=0.0)) < 0.1 else "stalled"
+                ev["blocker"] = root
+                return self.ego(f"the ego stayed behind the stationary {behind} in a queue that the {how} {root} "
+                                f"holds up, although {', '.join(free)} was free", decided=True, **ev)
             return self.ego(f"the ego stayed behind the stationary {behind} although {', '.join(free)} was free",
                             decided=True, **ev)
         return self.ego(f"the ego stood still although {', '.join(free)} was free", decided=True, **ev)

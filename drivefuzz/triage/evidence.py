@@ -375,10 +375,11 @@ def _bodies_on(trace, rmap, lane: str, f: int, s_from: float, reach: float):
 
 
 def blocked_lanes(trace, rmap, f: int, reach: float = 60.0):
-    """What blocks the ego standing at ``f``: ``(lanes, free, queue)`` with ``lanes`` the lawful lanes
-    of its edge whose nearest body ahead stands still (lane -> that body), ``free`` the others, and
-    ``queue`` a description when the stationary vehicle ahead of the ego is itself blocked (by a
-    stationary body close ahead of it, or at the end of its lane); None off the normal lanes."""
+    """What blocks the ego standing at ``f``: ``(lanes, free, queue, root)`` with ``lanes`` the lawful
+    lanes of its edge whose nearest body ahead stands still (lane -> that body), ``free`` the others,
+    and, for the stationary vehicle ahead of the ego in its own lane, either ``queue``, a description
+    when it queues for a junction (see :func:`_queue`), or ``root``, the parked or stalled vehicle it
+    stands behind (both None when it stands alone); None off the normal lanes."""
     lane = str(trace["lane"][f])
     dt = trace.step_length
     if lane.startswith(":"):  # in a junction there is one way forward: the body right ahead
@@ -403,19 +404,19 @@ def blocked_lanes(trace, rmap, f: int, reach: float = 60.0):
         while i + step in lanes_of and rmap.may_change(lanes_of[i], left=left):
             i += step
             lawful.append(lanes_of[i])
-    blocked, free, queue = {}, [], None
+    blocked, free, queue, root = {}, [], None, None
     for l in lawful:
         s_from = ego_pos if l == lane else ego_pos - EGO_LENGTH  # a body alongside blocks a change too
         bodies = _bodies_on(trace, rmap, l, f, s_from, reach)
         if bodies and _still(track(bodies[0][1]), f, dt):
             blocked[l] = bodies[0][1]
             if l == lane:
-                queue = _queue_blocked(trace, rmap, l, f, bodies, track, dt)
+                queue, root = _queue(trace, rmap, track(bodies[0][1]), f, track, dt)
         else:
             free.append(l)
     if not blocked:
         return None
-    return blocked, free, queue
+    return blocked, free, queue, root
 
 
 def _still_ahead(trace, f: int, dt: float, reach: float = 15.0) -> str | None:
@@ -433,22 +434,67 @@ def _still_ahead(trace, f: int, dt: float, reach: float = 15.0) -> str | None:
     return best[1] if best else None
 
 
-def _queue_blocked(trace, rmap, lane: str, f: int, bodies, track, dt) -> str | None:
-    """Why the stationary leader (first of ``bodies``) cannot go: a stationary body close ahead of
-    it, or it stands at the end of the lane (a queue at the junction)."""
-    g = rmap.geom(lane)
-    d0, lead = bodies[0]
-    lt = track(lead)
-    if lt.kind == "pedestrian":
-        return None
-    if float(np.nanmax(lt.speed[: f + 1], initial=0.0)) < 0.1:
-        return None  # a parked body, not a queue: it never moved
-    if len(bodies) > 1 and bodies[1][0] - d0 < lt.length / 2 + 12.0 and _still(track(bodies[1][1]), f, dt):
-        return f"{lead} stands behind the stationary {bodies[1][1]}"
-    pos, _ = g.project(float(lt.x[f]), float(lt.y[f]))
-    if g.length - pos - lt.length / 2 < 3.0:
-        return f"{lead} waits at the end of {lane}"
-    return None
+#: [m] a stationary vehicle this close (bumper to bumper) ahead of another is queued ahead of it; room
+#: for a small junction between them, where a car waits for space beyond it.
+QUEUE_GAP = 12.0
+#: [m] a queue's head this close to the end of its lane waits at the junction.
+AT_LANE_END = 3.0
+
+
+def _queue_ahead(trace, lead: Track, f: int, track, dt: float) -> list[Track]:
+    """``lead`` and the stationary vehicles queued ahead of it at ``f``, nearest first: each one's rear
+    within :data:`QUEUE_GAP` of the front of the one before, in its width, along its heading (so the
+    queue is followed across a junction on its way)."""
+    a = trace.actors
+    r = a.rows(f)
+    rows = [(a.ids[int(j)], float(x), float(y), float(a.length[int(j)]), float(a.width[int(j)]), a.kinds[int(j)])
+            for j, x, y in zip(a.actor[r], a.x[r], a.y[r])]
+    chain, seen = [lead], {lead.id}
+    while len(chain) <= len(rows):
+        cur = chain[-1]
+        cx, cy, h = float(cur.x[f]), float(cur.y[f]), float(cur.heading[f])
+        c, sn = math.cos(h), math.sin(h)
+        best = None
+        for aid, x, y, length, width, kind in rows:
+            if aid in seen or kind != "vehicle":
+                continue
+            lx, ly = (x - cx) * c + (y - cy) * sn, -(x - cx) * sn + (y - cy) * c
+            if 0.0 < lx < (cur.length + length) / 2 + QUEUE_GAP and abs(ly) < (cur.width + width) / 2 and (
+                    best is None or lx < best[0]):
+                best = (lx, aid)
+        if best is None or not _still(track(best[1]), f, dt):
+            return chain
+        seen.add(best[1])
+        chain.append(track(best[1]))
+    return chain
+
+
+def _queue(trace, rmap, lead: Track, f: int, track, dt: float) -> tuple[str | None, str | None]:
+    """``(queue, root)`` for the stationary ``lead`` ahead of the ego: ``queue`` describes a queue that
+    waits for a junction (the head of :func:`_queue_ahead` has moved and stands within
+    :data:`AT_LANE_END` of the end of its lane, or in a junction): it will move, and waiting in it is
+    lawful. ``root`` is the head when it does not (it never moved: a parked car; or it stopped in mid-lane:
+    a stalled one): a blockage, however many cars queue behind it. Both None for a pedestrian, or a lead
+    that stands alone in mid-lane or never moved (a blocker by itself)."""
+    if lead.kind == "pedestrian":
+        return None, None
+    chain = _queue_ahead(trace, lead, f, track, dt)
+    head = chain[-1]
+    moved = float(np.nanmax(head.speed[: f + 1], initial=0.0)) >= 0.1
+    x, y = float(head.x[f]), float(head.y[f])
+    where = None
+    normal = _lane_of(rmap, x, y, internal=False)
+    if normal is not None:
+        g = rmap.geom(normal)
+        if g.length - g.project(x, y)[0] - head.length / 2 < AT_LANE_END:
+            where = f"at the end of {normal}"
+    elif _lane_of(rmap, x, y, internal=True) is not None:
+        where = "in the junction"
+    if moved and where is not None:
+        if head is lead:
+            return f"{lead.id} waits {where}", None
+        return f"{lead.id} queues behind {head.id}, which waits {where}", None
+    return None, (None if head is lead else head.id)
 
 
 def held_up(trace, f: int, gap: float = 30.0) -> tuple[float, str] | None:

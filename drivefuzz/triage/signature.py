@@ -14,7 +14,8 @@ happened: no actor IDs (they are counters), no positions, no element IDs. Its fi
   (SUMO's link state), e.g. ``"junction/traffic_light"``;
 - ``other_kind`` (``vehicle``/``pedestrian``/``obstacle``/``none``) and ``other_nav`` (its navigation
   type in the scenario: ``autopilot``/``linear``/``maneuver``/``immobile``/``none``): the other party,
-  for a standstill the body that blocked the ego's lane;
+  for a standstill the body that blocked the ego's lane (the parked or stalled head of a queue that
+  would not move, not the car queued behind it);
 - ``approach``: where the other party came from relative to the ego's heading
   :data:`APPROACH_BEFORE` s before the event (``behind``/``ahead``/``left``/``right``/``oncoming``);
 - ``contact_side``: the side of the ego that was hit (``front``/``rear``/``left``/``right``/``none``);
@@ -125,6 +126,8 @@ def _other_party(mb, attribution: Attribution, trace, f: int) -> str | None:
         return mb.actors[0]
     if attribution.evidence.get("leader"):  # a time-out behind slower traffic
         return str(attribution.evidence["leader"])
+    if attribution.evidence.get("blocker"):  # a standstill in a queue behind a parked or stalled car
+        return str(attribution.evidence["blocker"])
     lanes = attribution.evidence.get("lanes")
     if isinstance(lanes, dict) and lanes:  # a standstill: the body blocking the ego's own lane, else any
         own = str(trace["lane"][f]) if trace.n_frames else ""
