@@ -254,6 +254,34 @@ def test_a_queue_held_up_across_a_junction_by_parked_cars_is_ego(tmp_path):
                         "B2M2_1 was free")
 
 
+def test_a_car_that_enters_the_ring_without_yielding_is_at_fault(tmp_path):
+    """A campaign's finding, kept as data (tests/data/ring_entry_fails_to_yield): the ego drives round the
+    ring (ringEN_0 to ringNW_0, a major link) when v1 enters from Nin_0 (a minor link) at 7.4 m/s without
+    yielding. SUMO first placed the ego on :rN_1_0, where the exit to Nout_0 overlaps the ring, so the ego's
+    link was read as the exit, which no entry has to yield to: filed as the ego's fault."""
+    import shutil
+
+    from drivefuzz.oracle import OracleSettings
+    from drivefuzz.scenario.sumofiles import load_scenario
+    from drivefuzz.triage.evidence import ego_link
+
+    net = Path(NET).with_name("roundabout.net.xml")
+    folder = tmp_path / "finding"
+    shutil.copytree(Path(__file__).parent / "data" / "ring_entry_fails_to_yield", folder)
+    shutil.copy(net, folder / net.name)
+    sc = load_scenario(folder)
+    ex = execute(sc, oracles=OracleSettings().instantiate())
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.kind, m.actors, m.frame) == ("collision", "vehicle", ("v1",), 141)
+    rmap = load_roadmap(net)
+    assert {str(ex.trace["lane"][k]) for k in range(100, 142)} >= {":rN_1_0", ":rN_2_0"}
+    mine = ego_link(ex.trace, rmap, m.frame)
+    assert (mine.getFromLane().getID(), mine.getToLane().getID()) == ("ringEN_0", "ringNW_0")
+    v = attribute(sc, ex.trace, m, rmap)
+    assert v.fault is Fault.OTHER, v.reason
+    assert v.reason == "the vehicle v1 came from Nin_0, a link that must yield, into the ego's right of way at rN"
+
+
 def test_changing_lanes_into_a_car_alongside_is_ego():
     # the reference ADS's real bug: its route needs A0B0_2 (left turn at B0), and it changes lanes into
     # a car driving alongside it there

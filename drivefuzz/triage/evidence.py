@@ -244,25 +244,34 @@ def other_link(trace, rmap, oth: Track, f: int, seconds: float = 10.0):
 
 
 def ego_link(trace, rmap, f: int, seconds: float = 15.0):
-    """The connection of the ego's junction passage around ``f`` (from its lane channel), or None."""
+    """The connection of the ego's junction passage around ``f`` (from its lane channel), or None.
+
+    The passage's internal lanes are tried newest first: where two connections from one lane overlap
+    before they part (a roundabout's exit and its ring), SUMO may place the ego on either at first, and
+    only the later frames tell which one it took."""
     lanes = trace["lane"]
     w = frames_before(trace, f, seconds)
-    via = None
+    run: list[str] = []  # the passage's internal lanes, newest first
     k = None
     for j in range(f, w.start - 1, -1):
-        if str(lanes[j]).startswith(":"):
-            via, k = str(lanes[j]), j
-        elif via is not None:
+        lane = str(lanes[j])
+        if lane.startswith(":"):
+            if lane not in run:
+                run.append(lane)
+            k = j
+        elif run:
             break
-    if via is None:  # not yet in the junction: the next frames do not exist; use the lane's only links
+    if not run:  # not yet in the junction: the next frames do not exist; use the lane's only links
         return None
     prev = next((str(lanes[j]) for j in range(k, w.start - 1, -1) if lanes[j] and not str(lanes[j]).startswith(":")),
                 None)
     if prev is None:
         return None
-    for c in rmap.lane(prev).getOutgoing():
-        if c.getViaLaneID() and via in rmap.internal_chain(c.getViaLaneID()):
-            return c
+    conns = [(c, rmap.internal_chain(c.getViaLaneID())) for c in rmap.lane(prev).getOutgoing() if c.getViaLaneID()]
+    for via in run:
+        for c, chain in conns:
+            if via in chain:
+                return c
     return None
 
 
