@@ -401,11 +401,12 @@ def test_unknown_other_party_is_unclear():
 
 @pytest.mark.parametrize("oracle, kind, wind, replayed", [
     ("speeding", "speeding", 0.0, False), ("red_light", "red", 0.0, False),
-    ("lane_invasion", "opposite_lane", 0.0, False), ("lane_invasion", "opposite_lane", 80.0, True)])
+    ("lane_invasion", "opposite_lane", 0.0, False), ("lane_invasion", "opposite_lane", 30.0, False),
+    ("lane_invasion", "opposite_lane", 80.0, True)])
 def test_the_ego_own_driving_is_ego(oracle, kind, wind, replayed):
-    # red lights and speed limits bind whatever happens around: no replay; lane keeping on a dry, calm road
-    # neither (the careful driver tracks its path the same way); lane keeping may be lost to wind or ice,
-    # so there a careful driver failing the same way excuses it
+    # red lights and speed limits bind whatever happens around: no replay; lane keeping on a dry road in a
+    # breeze (wind 30: 4.5 m/s) neither (the careful driver tracks its path the same way); lane keeping may be
+    # lost to a strong wind (80: 12 m/s) or ice, so there a careful driver failing the same way excuses it
     from drivefuzz.scenario import Weather
 
     sc = scenario("A0B0_1", 10.0, "B0C0", 40.0).model_copy(update={"weather": Weather(wind=wind)})
@@ -421,6 +422,26 @@ def test_the_ego_own_driving_is_ego(oracle, kind, wind, replayed):
     v = attribute(sc, ex.trace, m, load_roadmap(NET), replay=same)
     assert calls == (["careful"] if replayed else [])
     assert v.fault is (Fault.OTHER if replayed else Fault.EGO)
+    if replayed:  # the reason names what made the lane impossible to keep
+        assert v.reason.endswith(": a crosswind of 12.0 m/s") and v.evidence["cause"] == "a crosswind of 12.0 m/s"
+
+
+def test_a_lane_lost_on_ice_names_the_ice():
+    """A puddle of friction 0.05 over the turn from A0B0_1 into B0C0: the reason of a lane invasion that the
+    careful driver shares names the friction and when the ego met it."""
+    from drivefuzz.scenario import Puddle
+
+    sc = scenario("A0B0_1", 10.0, "B0C0", 40.0).model_copy(
+        update={"puddles": (Puddle(x=97.0, y=0.0, length=40.0, width=30.0, friction=0.05),)})
+    ex = execute(sc, oracles=oracles())
+    mu = np.fmin(ex.trace["mu_front"], ex.trace["mu_rear"])
+    k = int(np.flatnonzero(mu < 0.5)[0])
+    f = k + 20
+    m = Misbehavior("lane_invasion", "off_road", f, float(ex.trace["t"][f]), (0.0, 0.0))
+    v = attribute(sc, ex.trace, m, load_roadmap(NET), replay=lambda s: ((m,), None))
+    assert v.fault is Fault.OTHER
+    assert v.evidence["cause"] == f"friction 0.05 under the ego from {float(ex.trace['t'][k]):.1f} s", v.reason
+    assert v.reason.endswith(v.evidence["cause"])
 
 
 # ------------------------------------------------------------------ the careful driver

@@ -172,6 +172,10 @@ class Puddle(_Model):
         return out
 
 
+#: [m/s] the wind speed of ``Weather.wind`` = 100 (a strong gale's gusts; CARLA's scale has no unit).
+MAX_WIND_SPEED = 15.0
+
+
 class Weather(_Model):
     """DriveFuzz's eight weather aspects (CARLA's scales)."""
 
@@ -183,6 +187,11 @@ class Weather(_Model):
     puddle_density: float = Field(default=0.0, ge=0.0, le=100.0)
     sun_azimuth_deg: float = Field(default=0.0, ge=0.0, le=360.0, description="compass, 0 = north, clockwise")
     sun_altitude_deg: float = Field(default=90.0, ge=-90.0, le=90.0)
+
+    @property
+    def wind_speed(self) -> float:
+        """[m/s] the crosswind of ``wind`` (0-100): :data:`MAX_WIND_SPEED` at 100, linear."""
+        return MAX_WIND_SPEED * self.wind / 100.0
 
 
 class SignalShift(_Model):

@@ -292,7 +292,7 @@ class _Run:
         self.tls_links = tls_link_table(sim)
         self.puddles = Puddles(self.scenario.puddles)
         self.mu_surface = surface_friction(weather)
-        self.wind_amp = 0.5 * 1.2 * 0.9 * (params.length * 1.5) * (15.0 * weather.wind / 100.0) ** 2  # [N]
+        self.wind_amp = 0.5 * 1.2 * 0.9 * (params.length * 1.5) * weather.wind_speed ** 2  # [N]
         self.wind_phase = self.rng.uniform(0.0, 2.0 * math.pi)
         self.speed_limits: dict[str, float] = {}
         self.links_seen: dict[tuple, tuple[LaneLink, ...]] = {}

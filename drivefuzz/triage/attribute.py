@@ -102,6 +102,9 @@ MERGE_ROOM = 20.0
 REACHED_M = 10.0
 #: The ADS the counterfactual replay uses.
 CAREFUL_ADS = "careful"
+#: [m/s] a crosswind from which a lane may be lost however carefully one drives (Beaufort 5, a fresh breeze;
+#: below it the car's drift is centimetres): then the careful driver's replay may settle a lane invasion.
+WINDY = 8.0
 
 Replay = Callable[[Any], tuple[Sequence[Any], Any]]
 
@@ -159,22 +162,28 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
     # lane keeping on a dry, calm road, its failing too says nothing about avoidability (the rules decide);
     # lane keeping lost to ice or wind may have been unavoidable, which the replay can show
     oracle = misbehavior.oracle
-    settles = (oracle not in NO_COUNTERFACTUAL or ev.replay_may_settle
-               or (oracle == "lane_invasion" and _slippery_or_windy(scenario, trace, f)))
+    cause = _slippery_or_windy(scenario, trace, f) if oracle == "lane_invasion" else None
+    settles = oracle not in NO_COUNTERFACTUAL or ev.replay_may_settle or cause is not None
     if verdict.fault is not Fault.OTHER and not ev.decided and replay is not None and settles:
-        return counterfactual(scenario, misbehavior, replay, verdict)
+        out = counterfactual(scenario, misbehavior, replay, verdict)
+        if cause is not None and out.fault is Fault.OTHER:  # say what made the road impossible to keep
+            out = Attribution(out.fault, f"{out.reason}: {cause}", {**out.evidence, "cause": cause})
+        return out
     return verdict
 
 
-def _slippery_or_windy(scenario, trace, f: int, window_s: float = 6.0) -> bool:
-    """Wind in the weather, or friction under an axle below 0.5 in the ``window_s`` seconds before ``f`` (a car
-    that slid on ice may leave its lane seconds later, as its tyres regain grip)."""
-    if scenario.weather.wind > 0.0:
-        return True
+def _slippery_or_windy(scenario, trace, f: int, window_s: float = 6.0) -> str | None:
+    """What may make a lane impossible to keep at ``f``: friction under an axle below 0.5 in the ``window_s``
+    seconds before ``f`` (a car that slid on ice may leave its lane seconds later, as its tyres regain grip),
+    or a crosswind of at least :data:`WINDY` m/s; None for a dry road in a breeze or calm."""
     k0 = max(f - int(window_s / trace.step_length), 0)
-    mu = np.concatenate([trace["mu_front"][k0:f + 1], trace["mu_rear"][k0:f + 1]])
-    mu = mu[~np.isnan(mu)]
-    return bool(len(mu)) and float(mu.min()) < 0.5
+    mu = np.fmin(trace["mu_front"][k0:f + 1], trace["mu_rear"][k0:f + 1])
+    slippery = np.flatnonzero(mu < 0.5)  # NaN compares False
+    if len(slippery):
+        k = k0 + int(slippery[0])
+        return f"friction {float(np.nanmin(mu)):.2f} under the ego from {float(trace['t'][k]):.1f} s"
+    wind = scenario.weather.wind_speed
+    return f"a crosswind of {wind:.1f} m/s" if wind >= WINDY else None
 
 
 def _reached(trace, position, radius: float = REACHED_M) -> bool:
