@@ -73,6 +73,7 @@ from drivefuzz.triage.evidence import (
     gap_ahead,
     held_up,
     lane_changed,
+    never_moved,
     other_link,
     path_entry,
     ran_red,
@@ -514,8 +515,7 @@ class _Event:
         behind = own or next(iter(lanes.values()), None)  # mid-lane-change: the blocker of the lane it wants
         if behind is not None:
             if root is not None and own is not None:  # a queue that will not move: the blocker is its head
-                head = actor_track(trace, root)
-                how = "parked" if float(np.nanmax(head.speed[: f + 1], initial=0.0)) < 0.1 else "stalled"
+                how = "parked" if never_moved(actor_track(trace, root), f) else "stalled"
                 ev["blocker"] = root
                 return self.ego(f"the ego stayed behind the stationary {behind} in a queue that the {how} {root} "
                                 f"holds up, although {', '.join(free)} was free", decided=True, **ev)

@@ -354,6 +354,11 @@ def first_visible(trace, oth: Track, f: int, scenario) -> int | None:
 
 
 # ---------------------------------------------------------------------- blocked roads
+def never_moved(track: Track, f: int) -> bool:
+    """Whether ``track`` had not moved (faster than 0.1 m/s) up to ``f``: a parked body."""
+    return float(np.nanmax(track.speed[: f + 1], initial=0.0)) < 0.1
+
+
 def _still(track: Track, f: int, dt: float) -> bool:
     w = track.speed[max(f - int(STILL_FOR / dt), 0):f + 1]
     w = w[~np.isnan(w)]
@@ -489,7 +494,6 @@ def _queue(trace, rmap, lead: Track, f: int, track, dt: float) -> tuple[str | No
         return None, None
     chain = _queue_ahead(trace, lead, f, track, dt)
     head = chain[-1]
-    moved = float(np.nanmax(head.speed[: f + 1], initial=0.0)) >= 0.1
     x, y = float(head.x[f]), float(head.y[f])
     where = None
     normal = _lane_of(rmap, x, y, internal=False)
@@ -499,7 +503,7 @@ def _queue(trace, rmap, lead: Track, f: int, track, dt: float) -> tuple[str | No
             where = f"at the end of {normal}"
     elif _lane_of(rmap, x, y, internal=True) is not None:
         where = "in the junction"
-    if moved and where is not None:
+    if where is not None and not never_moved(head, f):
         if head is lead:
             return f"{lead.id} waits {where}", None
         return f"{lead.id} queues behind {head.id}, which waits {where}", None
