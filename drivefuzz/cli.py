@@ -307,7 +307,8 @@ def seed(network, count, out, rng_seed, no_verify, force):
               help="How successors are chosen: the risk score, the paper's driving-quality score, or at random [risk].")
 @click.option("--no-feedback", is_flag=True, help="Same as --feedback random (the paper's baseline).")
 @click.option("--single-pass", is_flag=True, help="One lineage per seed, then stop (the default without a budget).")
-@click.option("--report-all", is_flag=True, help="Count incidents (not the ego's fault) as findings too.")
+@click.option("--report-all", is_flag=True,
+              help="Count incidents (not the ego's fault) as findings too, and measure their reproduction rates.")
 @click.option("--report", "write_html", is_flag=True, help="Write OUT/report.html and report.md at the end.")
 @click.option("--continue-after-finding", is_flag=True, help="Keep fuzzing a seed after a finding.")
 @click.option("--shrink", type=click.IntRange(0, 1000), default=None,
@@ -341,6 +342,8 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
             cfg.budget_s = parse_duration(budget)
         if max_execs is not None:
             cfg.max_execs = max_execs
+        if report_all:
+            cfg.reproduce_incidents = True
     else:
         if not network:
             raise InvalidConfig("fuzz", "NETWORK", "missing", "a .net.xml file, or --resume OUT")
@@ -352,7 +355,8 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
             cycles=cycles, population=population, strategy=strategy, seed=rng_seed, budget=budget,
             max_execs=max_execs, feedback=feedback, no_feedback=no_feedback, single_pass=single_pass,
             continue_after_finding=continue_after_finding, shrink=shrink, time_limit=time_limit,
-            no_isolation=no_isolation, exec_timeout=exec_timeout), ads_name, ads_option, oracle_kv, no_oracle)
+            no_isolation=no_isolation, exec_timeout=exec_timeout, report_all=report_all), ads_name, ads_option,
+            oracle_kv, no_oracle)
         from drivefuzz.ads import load_ads
 
         load_ads(cfg.ads.name, cfg.ads.options)  # fail now on an unknown ADS or option
@@ -419,6 +423,7 @@ def _fuzz_config(config: dict[str, Any], config_file: str | None, cli: dict[str,
         feedback="random" if pick("no_feedback", False) else pick("feedback", "risk"),
         single_pass=pick("single_pass", False),
         continue_after_finding=pick("continue_after_finding", False), shrink=pick("shrink", 10), ads=ads,
+        reproduce_incidents=pick("report_all", False),  # incidents measured like the findings they count as
         oracles=_oracle_settings(config, oracle_kv, no_oracle, source=config_file),
         mutation=MutationConfig.model_validate(config.get("mutation", {})),
         quality=QualityConfig.model_validate(config.get("quality", {})),

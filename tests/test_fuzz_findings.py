@@ -78,7 +78,7 @@ def test_reckless_crossers_are_incidents_when_they_run_the_red_and_findings_when
 
     seed = read_scenario(SEED_005)
     mut = _Reckless(town)
-    store = FindingStore(tmp_path, town, run, TriageConfig(reproduce=1))
+    store = FindingStore(tmp_path, town, run, TriageConfig(reproduce=1, reproduce_incidents=False))
     filed = {}
     for k in range(6):
         sc = mut.add_actor(seed, random.Random(k), ActorKind.VEHICLE, NavType.LINEAR).scenario
@@ -99,3 +99,27 @@ def test_reckless_crossers_are_incidents_when_they_run_the_red_and_findings_when
     (finding, reason), *repeats = filed["ego"]
     assert finding.rel.startswith("findings/") and "did not yield" in reason
     assert repeats and all(r.rel == finding.rel and not r.new and r.executions == 0 for r, _ in repeats)
+    # the finding was re-run (reproduce=1); the incident was not (reproduce_incidents=False)
+    reproduction = {got.fault: json.loads((tmp_path / got.rel / "verdict.json").read_text())["reproduction"]
+                    for got in (incident, finding)}
+    assert reproduction["other"] is None and reproduction["ego"]["runs"] == 1
+    assert incident.executions == 0
+
+
+def test_report_all_measures_the_reproduction_of_incidents_too():
+    """--report-all counts incidents as findings, so their reproduction rates are measured like the findings';
+    without it they are not (their reruns would be executions taken from the search). A manifest from before
+    the option resumes as it ran: incidents reproduced."""
+    from drivefuzz.campaign.fuzz import FuzzConfig
+    from drivefuzz.cli import _fuzz_config
+
+    def cfg(**cli):
+        return _fuzz_config({}, None, {"budget": None, **cli}, None, (), (), ())
+
+    assert cfg().reproduce_incidents is False
+    assert cfg(report_all=True).reproduce_incidents is True
+    c = cfg(report_all=True)
+    assert FuzzConfig.from_json(json.loads(json.dumps(c.to_json()))).reproduce_incidents is True
+    old = FuzzConfig().to_json()
+    del old["reproduce_incidents"]
+    assert FuzzConfig.from_json(old).reproduce_incidents is True

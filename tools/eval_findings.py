@@ -17,7 +17,7 @@ reference ADS (``FuzzConfig(max_execs=N, strategy=S, seed=SEED)``, everything el
 Usage::
 
     python tools/eval_findings.py [--execs 600] [--strategies all,entropy] [--seed 0] [--network town]
-                                  [--jobs 2] [--keep DIR] [--reproduce 5] [--report DIR ...]
+                                  [--jobs 2] [--keep DIR] [--reproduce 5] [--reproduce-incidents] [--report DIR ...]
 
 ``--keep DIR`` keeps each campaign in ``DIR/<strategy>`` so that a person can read its traces;
 ``--report DIR`` prints the figures of existing campaign directories without running anything.
@@ -51,7 +51,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=0, help="campaign RNG seed [0]")
     ap.add_argument("--network", default="town", help="a bundled network name or a .net.xml [town]")
     ap.add_argument("--jobs", type=int, default=2, help="seed jobs at once on a local Dask cluster [2]")
-    ap.add_argument("--reproduce", type=int, default=5, help="perturbed reruns of each new signature [5]")
+    ap.add_argument("--reproduce", type=int, default=5, help="perturbed reruns of each new finding [5]")
+    ap.add_argument("--reproduce-incidents", action="store_true",
+                    help="re-run the new incidents too (what drivefuzz fuzz --report-all does)")
     ap.add_argument("--keep", type=Path, help="keep the campaign directories here (DIR/<strategy>)")
     ap.add_argument("--report", type=Path, nargs="+", help="only print the figures of these campaign directories")
     args = ap.parse_args(argv)
@@ -101,7 +103,8 @@ def run_strategy(out: Path, strategy: str, args) -> float:
     from drivefuzz.campaign.fuzz import FuzzConfig
 
     net, seeds = _network_and_seeds(args.network)
-    cfg = FuzzConfig(max_execs=args.execs, strategy=strategy, seed=args.seed, reproduce=args.reproduce)
+    cfg = FuzzConfig(max_execs=args.execs, strategy=strategy, seed=args.seed, reproduce=args.reproduce,
+                     reproduce_incidents=args.reproduce_incidents)
     argv = ["tools/eval_findings.py", "--execs", str(args.execs), "--strategies", strategy, "--seed", str(args.seed),
             "--network", args.network]
     print(f"running: strategy {strategy}, {args.execs} executions, {len(seeds)} seeds of {net.name}, "
@@ -156,7 +159,7 @@ def report(out: Path, strategy: str, wall_s: float | None) -> None:
         if rows:
             print(f"{title}:")
         for r in sorted(rows, key=lambda r: -r["hits"]):
-            rep = (r["reproduction"] or {}).get("label", "not reproduced")
+            rep = (r["reproduction"] or {}).get("label", "reproduction not measured")
             print(f"  {r['folder']}\n      hits {r['hits']}, {rep}\n      {r['label']}\n      reason: {r['reason']}")
     print(flush=True)
 

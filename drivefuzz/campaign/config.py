@@ -31,6 +31,7 @@ class FuzzConfig:
     single_pass: bool = False  # one lineage per seed, even with a budget
     patience: int = 3  # cycles without a new best before a lineage yields
     reproduce: int = 5  # perturbed reruns of each new signature's representative (0: none)
+    reproduce_incidents: bool = False  # reproduction rates of incidents too (not the ego's fault: --report-all)
     shrink: int = 10  # executions spent shrinking each new finding to a minimal reproducer (0: none)
     ads: AdsSpec = field(default_factory=AdsSpec)
     oracles: OracleSettings = field(default_factory=OracleSettings)
@@ -61,7 +62,8 @@ class FuzzConfig:
             "cycles": self.cycles, "population": self.population, "strategy": self.strategy, "seed": self.seed,
             "budget_s": self.budget_s, "max_execs": self.max_execs, "feedback": self.feedback,
             "continue_after_finding": self.continue_after_finding, "single_pass": self.single_pass,
-            "patience": self.patience, "reproduce": self.reproduce, "shrink": self.shrink, "ads": self.ads.model_dump(mode="json"),
+            "patience": self.patience, "reproduce": self.reproduce, "reproduce_incidents": self.reproduce_incidents,
+            "shrink": self.shrink, "ads": self.ads.model_dump(mode="json"),
             "oracles": self.oracles.settings, "mutation": self.mutation.model_dump(mode="json"),
             "quality": self.quality.model_dump(mode="json"), "risk": self.risk.model_dump(mode="json"),
             "time_limit": self.time_limit, "isolate": self.isolate, "exec_timeout_s": self.exec_timeout_s,
@@ -73,7 +75,9 @@ class FuzzConfig:
             cycles=d["cycles"], population=d["population"], strategy=d["strategy"], seed=d["seed"],
             budget_s=d.get("budget_s"), max_execs=d.get("max_execs"), feedback=d.get("feedback", "risk"),
             continue_after_finding=d.get("continue_after_finding", False), single_pass=d.get("single_pass", False),
-            patience=d.get("patience", 3), reproduce=d.get("reproduce", 5), shrink=d.get("shrink", 0),
+            patience=d.get("patience", 3), reproduce=d.get("reproduce", 5),
+            reproduce_incidents=d.get("reproduce_incidents", True),  # campaigns from before it reproduced them
+            shrink=d.get("shrink", 0),
             ads=AdsSpec.model_validate(d.get("ads", {})), oracles=OracleSettings(settings=d.get("oracles", {})),
             mutation=MutationConfig.model_validate(d.get("mutation", {})),
             quality=QualityConfig.model_validate(d.get("quality", {})),

@@ -196,7 +196,8 @@ class SeedJob:
         if runner.host is not None:
             _warm_up()
         store = FindingStore(self.out, mutator.rmap, runner.misbehaviors,
-                             TriageConfig(reproduce=cfg.reproduce, shrink=cfg.shrink),
+                             TriageConfig(reproduce=cfg.reproduce, reproduce_incidents=cfg.reproduce_incidents,
+                                          shrink=cfg.shrink),
                              {"oracles": cfg.oracles.settings, "exec_timeout_s": cfg.exec_timeout_s})
 
         def execute(key: str, scenario, parent, description: str, retries: int, t_mutate: float,

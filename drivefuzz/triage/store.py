@@ -7,7 +7,8 @@ A seed job hands every execution whose oracles fired to :meth:`FindingStore.tria
    execution is one more hit of that finding (or incident), and nothing else runs.
 3. For a **new** signature: the counterfactual replay by the careful driver when the rules did not excuse
    the ego (the verdict, and so the signature, may change to ``other`` or ``unclear``), then the **reproduction rate** under small
-   perturbations (:mod:`drivefuzz.triage.reproduce`), then the folder is written.
+   perturbations (:mod:`drivefuzz.triage.reproduce`; for an incident only with
+   ``TriageConfig.reproduce_incidents``), then the folder is written.
 
 4. For a new **finding** (not an incident), with ``TriageConfig.shrink`` executions: a minimal reproducer
    by delta debugging (:mod:`drivefuzz.triage.shrink`), in the folder's ``minimal/``.
@@ -69,6 +70,7 @@ class Triaged:
 class TriageConfig:
     counterfactual: bool = True  # replay with the careful driver when the rules blame the ego
     reproduce: int = 5  # perturbed reruns of each new signature's representative (0: none)
+    reproduce_incidents: bool = True  # also of a new incident (fault other), not only of a new finding
     shrink: int = 0  # executions to shrink each new finding (not incidents) to a minimal reproducer (0: none)
 
 
@@ -132,7 +134,7 @@ class FindingStore:
                     return Triaged(seen, sig_key, fault, False, spent)
             att = att2
         reproduction = None
-        if trace is not None and self.cfg.reproduce > 0:
+        if trace is not None and self.cfg.reproduce > 0 and (fault != "other" or self.cfg.reproduce_incidents):
             from drivefuzz.triage.reproduce import reproduction_rate
 
             def rerun(sc):
