@@ -227,15 +227,77 @@ def test_a_queue_whose_head_waits_at_the_lane_end_is_other():
                dest_edge="B0C0", maneuvers=(Maneuver(time=5.6, action="speed", value=0.0),))
     m, v = judge(scenario("A0B0_1", 10.0, "B0C0", 40.0, v0))
     assert m.oracle == "immobility"
-    assert v.fault is Fault.OTHER and v.reason == "the ego waits in a queue for the junction: v0 waits at the end " \
+    assert v.fault is Fault.OTHER and v.reason == "the ego waits in a queue that will move: v0 waits at the end " \
         "of A0B0_1", v.reason
+
+
+def test_a_queue_whose_head_waits_in_the_junction_is_other():
+    """v0 stops inside junction B0 on its turn, v1 behind it at the end of A0B0_1, the ego behind v1: a queue
+    for the junction, though A0B0_2 is free."""
+    actors = [Actor(id="v0", kind="vehicle", nav="maneuver", start_lane="A0B0_1", start_pos=70.0, speed=6.0,
+                    dest_edge="B0C0", maneuvers=(Maneuver(time=8.5, action="speed", value=0.0),)),
+              Actor(id="v1", kind="vehicle", nav="maneuver", start_lane="A0B0_1", start_pos=50.0, speed=6.0,
+                    dest_edge="B0C0", maneuvers=(Maneuver(time=0.0, action="speed", value=6.0),))]
+    m, v = judge(scenario("A0B0_1", 10.0, "B0C0", 40.0, *actors))
+    assert m.oracle == "immobility" and v.evidence["ego_lane"] == "A0B0_1"
+    assert v.fault is Fault.OTHER
+    assert v.reason == "the ego waits in a queue that will move: v1 queues behind v0, which waits in the junction"
+
+
+@pytest.mark.parametrize("front, queue", [
+    (None, None), ("pedestrian", "v1 waits for p1"), ("moving car", "v1 waits for v2")])
+def test_a_car_that_waits_for_a_body_ahead_of_it_heads_a_queue(front, queue):
+    """Hand-made trace on A0B0_1: the ego stands behind v1, which moved earlier and has stood for 9 s in
+    mid-lane. Alone it blocks the ego (no queue); with a pedestrian standing 3 m ahead of it, or a car moving
+    off there, it waits: a queue that will move."""
+    from drivefuzz.sim.trace import trace_from_arrays
+    from drivefuzz.triage.evidence import blocked_lanes
+
+    n = 200
+    ego = {"x": np.full(n, 45.9), "y": np.full(n, -4.8), "heading": np.zeros(n), "speed": np.zeros(n),
+           "lane": ["A0B0_1"] * n}
+    moved = np.where(np.arange(n) < 20, 1.0, 0.0)
+    actors = [{"id": "v1", "kind": "vehicle", "length": 4.6, "width": 1.9, "x": 65.9, "y": -4.8, "heading": 0.0,
+               "speed": moved}]
+    if front == "pedestrian":
+        actors.append({"id": "p1", "kind": "pedestrian", "length": 0.5, "width": 0.5, "x": 71.5, "y": -4.8,
+                       "heading": 1.57, "speed": 0.0})
+    elif front == "moving car":
+        actors.append({"id": "v2", "kind": "vehicle", "length": 4.6, "width": 1.9, "x": 74.0, "y": -4.8,
+                       "heading": 0.0, "speed": 2.0})
+    trace = trace_from_arrays(ego, {"step_length": 0.05}, actors)
+    lanes, free, got_queue, root = blocked_lanes(trace, load_roadmap(NET), n - 1)
+    assert lanes == {"A0B0_1": "v1"} and free == ["A0B0_2"]
+    assert (got_queue, root) == (queue, None)
+
+
+def test_a_standstill_in_a_junction_behind_a_stopped_car_is_other():
+    """v0 stops in junction B0 on its left turn, and the ego stops behind it, inside the junction: one way
+    forward, blocked (this path of the rules crashed once on the queue's new fields)."""
+    v0 = Actor(id="v0", kind="vehicle", nav="maneuver", start_lane="A0B0_1", start_pos=70.0, speed=6.0,
+               dest_edge="B0C0", maneuvers=(Maneuver(time=8.5, action="speed", value=0.0),))
+    m, v = judge(scenario("A0B0_1", 10.0, "B0C0", 40.0, v0))
+    assert m.oracle == "immobility" and v.evidence["ego_lane"].startswith(":B0_")
+    assert v.fault is Fault.OTHER and v.reason == f"every lawful way forward is blocked by stationary bodies: " \
+        f"{v.evidence['ego_lane']} by v0"
+
+
+def test_a_parked_car_ahead_of_the_ego_blocks_it_whatever_waits_beyond():
+    """The car right ahead of the ego never moved; 5 m ahead of it v0 waits at the end of A0B0_1. The parked
+    car blocks the ego whatever waits beyond it: with A0B0_2 free, the ego's (not 'a queue for the junction')."""
+    actors = [Actor(id="parked", kind="vehicle", nav="immobile", start_lane="A0B0_1", start_pos=95.0, speed=0.0),
+              Actor(id="v0", kind="vehicle", nav="maneuver", start_lane="A0B0_1", start_pos=103.0, speed=3.0,
+                    dest_edge="B0C0", maneuvers=(Maneuver(time=2.0, action="speed", value=0.0),))]
+    m, v = judge(scenario("A0B0_1", 10.0, "B0C0", 40.0, *actors))
+    assert m.oracle == "immobility"
+    assert v.fault is Fault.EGO and v.reason == "the ego stayed behind the stationary parked although A0B0_2 was free"
 
 
 def test_a_queue_held_up_across_a_junction_by_parked_cars_is_ego(tmp_path):
     """A campaign's incident, kept as data (tests/data/queue_behind_parked_cars): v4 waits at the end of
     B2M2_2 for room beyond junction M2, where v2 stands behind the parked v3 and v0 on M2C2_2; the ego stands
     behind v4 for 60 s with B2M2_1 free. Filed as 'the queue ahead is itself blocked': the queue is followed
-    across the junction to the parked car at its head."""
+    across the junction to the first parked car in it (v3; the head, v0, is parked too)."""
     import shutil
 
     from drivefuzz.oracle import OracleSettings
@@ -250,7 +312,7 @@ def test_a_queue_held_up_across_a_junction_by_parked_cars_is_ego(tmp_path):
     assert (m.oracle, m.kind, m.frame) == ("immobility", "immobile", 1347)
     v = attribute(sc, ex.trace, m, load_roadmap(NET))
     assert v.fault is Fault.EGO, v.reason
-    assert v.reason == ("the ego stayed behind the stationary v4 in a queue that the parked v0 holds up, although "
+    assert v.reason == ("the ego stayed behind the stationary v4 in a queue that the parked v3 holds up, although "
                         "B2M2_1 was free")
 
 

@@ -97,3 +97,16 @@ def test_ctrl_c_stops_cleanly_and_resume_finishes(tmp_path, seeds):
     r = _cli("fuzz", "--resume", str(out))
     r.communicate(timeout=120)
     _same_as_reference(out, _reference(tmp_path, seeds))
+
+
+def test_resume_with_report_all_reproduces_incidents_from_then_on(tmp_path, seeds):
+    """--report-all on a resume reaches the seed jobs (they read the manifest): incidents found from then on
+    get their reproduction rates, as the findings they are now counted as."""
+    out = tmp_path / "out"
+    p = _cli("fuzz", str(TOWN), "--seeds", str(seeds), "-o", str(out), "--max-execs", "1", "--seed", "3")
+    p.communicate(timeout=120)
+    assert json.loads((out / "manifest.json").read_text())["config"]["reproduce_incidents"] is False
+    p = _cli("fuzz", "--resume", str(out), "--max-execs", "1", "--report-all")
+    p.communicate(timeout=120)
+    assert p.returncode in (0, 1)
+    assert json.loads((out / "manifest.json").read_text())["config"]["reproduce_incidents"] is True

@@ -10,7 +10,8 @@ other vehicle was before). It prints, per ADS and per crash type:
 - the collisions (executions) and the distinct signatures they were filed under;
 - how many of them were the ego's fault (the campaign's attribution: rules and the careful driver's
   counterfactual replay);
-- the reproduction of their signatures' folders (``reproduced k/N`` under small perturbations);
+- the reproduction of their signatures' folders (``reproduced k/N`` under small perturbations; findings only:
+  incidents are not re-run unless a campaign counts them as findings, ``--report-all``);
 
 then how many of the campaign's finding folders ``drivefuzz replay`` reproduces (same oracle, same frame),
 and the crash types that never occurred.

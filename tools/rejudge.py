@@ -1,8 +1,9 @@
 """Re-judge the findings and incidents of campaign folders with the current attribution rules.
 
-For every folder under ``CAMPAIGN/findings/`` and ``CAMPAIGN/incidents/``: the stored scenario, trace and first
-misbehaviour are judged again (:func:`drivefuzz.triage.attribute.attribute`, with the careful driver's
-replay as the campaign runs it) and signed again (:func:`drivefuzz.triage.signature.signature`). Prints
+For every folder under ``CAMPAIGN/findings/`` and ``CAMPAIGN/incidents/`` with a trace (not a simulator crash):
+the stored scenario, trace and first misbehaviour are judged again
+(:func:`drivefuzz.triage.attribute.attribute`, with the careful driver's replay under the campaign's oracle
+settings, as its triage ran it) and signed again (:func:`drivefuzz.triage.signature.signature`). Prints
 each folder whose fault, reason or signature changed, the old and the new, then a count::
 
     python tools/rejudge.py CAMPAIGN [CAMPAIGN ...]
@@ -35,10 +36,6 @@ def main(argv: list[str] | None = None) -> int:
     from drivefuzz.triage.attribute import attribute
     from drivefuzz.triage.signature import signature
 
-    def careful(sc):
-        ex = execute(sc, oracles=OracleSettings().instantiate())
-        return ex.misbehaviors, ex.trace
-
     total = changed = faults = 0
     for camp in args.campaigns:
         folders = sorted(p for kind in ("findings", "incidents") for p in (camp / kind).glob("*") if p.is_dir())
@@ -46,6 +43,14 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{camp}: no findings/ or incidents/ folders", file=sys.stderr)
         for d in folders:
             old = json.loads((d / "verdict.json").read_text())
+            if not (d / "trace").is_dir():  # a crash or hang of the simulator: nothing to judge
+                continue
+            settings = OracleSettings(settings=old.get("oracles") or {})  # the campaign's, as its triage ran
+
+            def careful(sc, settings=settings):
+                ex = execute(sc, oracles=settings.instantiate())
+                return ex.misbehaviors, ex.trace
+
             sc = load_scenario(d)
             trace = Trace.load(d / "trace")
             m = Misbehavior.from_dict(old["misbehaviors"][0])

@@ -139,6 +139,7 @@ class ManifestConfig(BaseModel):
     max_execs: int | None = Field(default=None, ge=1)
     feedback: bool | Literal["risk", "paper", "random"] = "risk"
     continue_after_finding: bool = False
+    reproduce_incidents: bool = True  # manifests from before the key: their campaigns reproduced incidents
     shrink: int = Field(default=0, ge=0)
     ads: AdsSection = Field(default_factory=AdsSection)
     oracles: dict[str, dict[str, Any]] = Field(default_factory=dict)

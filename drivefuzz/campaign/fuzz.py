@@ -172,9 +172,11 @@ class Campaign:
                 "seed": self.cfg.seed, "seeds": [f"seeds/{i:03d}" for i in range(len(self.seeds))],
                 "started": time.strftime("%Y-%m-%dT%H:%M:%S"), "run": 1,
             })
-        else:  # a resume is a new run, with budgets of its own; the rest of the configuration is the campaign's
+        else:  # a resume is a new run, with budgets of its own (and --report-all's reproduction of incidents);
+            # the rest of the configuration is the campaign's
             manifest = json.loads((self.out / "manifest.json").read_text())
-            manifest["config"].update(budget_s=self.cfg.budget_s, max_execs=self.cfg.max_execs)
+            manifest["config"].update(budget_s=self.cfg.budget_s, max_execs=self.cfg.max_execs,
+                                      reproduce_incidents=self.cfg.reproduce_incidents)
             manifest["run"] = manifest.get("run", 1) + 1
             atomic_write_json(self.out / "manifest.json", manifest)
         (self.out / STOP_FILE).unlink(missing_ok=True)

@@ -172,7 +172,7 @@ class Puddle(_Model):
         return out
 
 
-#: [m/s] the wind speed of ``Weather.wind`` = 100 (a strong gale's gusts; CARLA's scale has no unit).
+#: [m/s] the wind speed of ``Weather.wind`` = 100 (a near gale, Beaufort 7; CARLA's scale has no unit).
 MAX_WIND_SPEED = 15.0
 
 

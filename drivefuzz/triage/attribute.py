@@ -24,11 +24,11 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
      line of sight past other vehicles);
   5. *blocked* (immobility and mission): every lane the ego may lawfully use is blocked ahead by a
      stationary body (in a junction: the body right ahead), a pedestrian stands in its lane ahead,
-     or the ego waits in a queue for a junction (its head has moved and waits at the end of its lane
-     or in the junction); a mission time-out while the ego spent most of the run held up behind
-     slower traffic. Waiting behind a stationary body with a lawful lane free is the ego's (decided:
+     or the ego waits in a queue that will move (no parked car in it, and its head waits at the end of
+     its lane, in a junction, or for a body ahead of it); a mission time-out while the ego spent most
+     of the run held up behind slower traffic. Waiting behind a stationary body with a lawful lane free is the ego's (decided:
      the careful driver does not overtake either), also when cars queue between the ego and that
-     body (a parked car, or one stalled in mid-lane, heads the queue: it will not move).
+     body (a parked car in the queue, or a car stalled in mid-lane at its head: it will not move).
 
   Rules 1-3 excuse the ego only for a body that came to it: one that moved in the last
   :data:`APPROACH_WINDOW` seconds (farther than the stationary speed takes a body, or farther than
@@ -511,7 +511,7 @@ class _Event:
             what = ", ".join(f"{l} by {b}" for l, b in lanes.items())
             return self.other(f"every lawful way forward is blocked by stationary bodies: {what}", **ev)
         if queue is not None and (leads is None or str(trace["lane"][f]) in leads):  # a queue on the way on
-            return self.other(f"the ego waits in a queue for the junction: {queue}", queue=queue, **ev)
+            return self.other(f"the ego waits in a queue that will move: {queue}", queue=queue, **ev)
         behind = own or next(iter(lanes.values()), None)  # mid-lane-change: the blocker of the lane it wants
         if behind is not None:
             if root is not None and own is not None:  # a queue that will not move: the blocker is its head

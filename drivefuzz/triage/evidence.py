@@ -398,7 +398,7 @@ def blocked_lanes(trace, rmap, f: int, reach: float = 60.0):
     dt = trace.step_length
     if lane.startswith(":"):  # in a junction there is one way forward: the body right ahead
         ahead = _still_ahead(trace, f, dt)
-        return ({lane: ahead}, [], None) if ahead else None
+        return ({lane: ahead}, [], None, None) if ahead else None
     if not lane or not rmap.has_lane(lane):
         return None
     tracks: dict[str, Track] = {}
@@ -455,13 +455,14 @@ QUEUE_GAP = 12.0
 AT_LANE_END = 3.0
 
 
-def _queue_ahead(trace, lead: Track, f: int, track, dt: float) -> list[Track]:
-    """``lead`` and the stationary vehicles queued ahead of it at ``f``, nearest first: each one's rear
-    within :data:`QUEUE_GAP` of the front of the one before, in its width, along its heading (so the
-    queue is followed across a junction on its way)."""
+def _queue_ahead(trace, lead: Track, f: int, track, dt: float) -> tuple[list[Track], str | None]:
+    """``(chain, front)``: ``lead`` and the stationary vehicles queued ahead of it at ``f``, nearest first
+    (each one's rear within :data:`QUEUE_GAP` of the front of the one before, in its width, along its
+    heading: the queue is followed across a junction on its way), and ``front``, the body in that reach
+    ahead of the last one that is not a stationary vehicle (a pedestrian, or a car moving off), or None."""
     a = trace.actors
     r = a.rows(f)
-    rows = [(a.ids[int(j)], float(x), float(y), float(a.length[int(j)]), float(a.width[int(j)]), a.kinds[int(j)])
+    rows = [(a.ids[int(j)], float(x), float(y), float(a.length[int(j)]), float(a.width[int(j)]))
             for j, x, y in zip(a.actor[r], a.x[r], a.y[r])]
     chain, seen = [lead], {lead.id}
     while len(chain) <= len(rows):
@@ -469,41 +470,60 @@ def _queue_ahead(trace, lead: Track, f: int, track, dt: float) -> list[Track]:
         cx, cy, h = float(cur.x[f]), float(cur.y[f]), float(cur.heading[f])
         c, sn = math.cos(h), math.sin(h)
         best = None
-        for aid, x, y, length, width, kind in rows:
-            if aid in seen or kind != "vehicle":
+        for aid, x, y, length, width in rows:
+            if aid in seen:
                 continue
             lx, ly = (x - cx) * c + (y - cy) * sn, -(x - cx) * sn + (y - cy) * c
             if 0.0 < lx < (cur.length + length) / 2 + QUEUE_GAP and abs(ly) < (cur.width + width) / 2 and (
                     best is None or lx < best[0]):
                 best = (lx, aid)
-        if best is None or not _still(track(best[1]), f, dt):
-            return chain
-        seen.add(best[1])
-        chain.append(track(best[1]))
-    return chain
+        if best is None:
+            return chain, None
+        nxt = track(best[1])
+        if nxt.kind != "vehicle" or not _still(nxt, f, dt):
+            return chain, nxt.id
+        seen.add(nxt.id)
+        chain.append(nxt)
+    return chain, None
+
+
+def _lane_at(rmap, x: float, y: float) -> str | None:
+    """The passenger lane, normal or internal (a junction's), whose centre line is nearest (x, y), within 3 m."""
+    best = None
+    for lane, dist in rmap.net.getNeighboringLanes(x, y, 3.0, includeJunctions=True):
+        if lane.allows("passenger") and (best is None or dist < best[1]):
+            best = (lane.getID(), dist)
+    return best[0] if best else None
 
 
 def _queue(trace, rmap, lead: Track, f: int, track, dt: float) -> tuple[str | None, str | None]:
-    """``(queue, root)`` for the stationary ``lead`` ahead of the ego: ``queue`` describes a queue that
-    waits for a junction (the head of :func:`_queue_ahead` has moved and stands within
-    :data:`AT_LANE_END` of the end of its lane, or in a junction): it will move, and waiting in it is
-    lawful. ``root`` is the head when it does not (it never moved: a parked car; or it stopped in mid-lane:
-    a stalled one): a blockage, however many cars queue behind it. Both None for a pedestrian, or a lead
-    that stands alone in mid-lane or never moved (a blocker by itself)."""
-    if lead.kind == "pedestrian":
+    """``(queue, root)`` for the stationary ``lead`` ahead of the ego, from the queue :func:`_queue_ahead`
+    follows. ``root`` is the first car of it that never moved (a parked car; not the lead itself: that blocks
+    alone), or its head when the head stopped in mid-lane with nothing ahead of it (a stalled car): a
+    blockage, however many cars queue behind it. Otherwise ``queue`` describes a queue that waits: its head
+    stands within :data:`AT_LANE_END` of the end of its lane or in a junction, or waits for a body ahead of
+    it (a pedestrian, a car moving off); it will move, and waiting in it is lawful. Both None for a
+    pedestrian lead, a lead that never moved, or one that stands alone in mid-lane."""
+    if lead.kind == "pedestrian" or never_moved(lead, f):
         return None, None
-    chain = _queue_ahead(trace, lead, f, track, dt)
+    chain, front = _queue_ahead(trace, lead, f, track, dt)
+    parked = next((t for t in chain if never_moved(t, f)), None)
+    if parked is not None:
+        return None, parked.id
     head = chain[-1]
     x, y = float(head.x[f]), float(head.y[f])
     where = None
-    normal = _lane_of(rmap, x, y, internal=False)
-    if normal is not None:
-        g = rmap.geom(normal)
-        if g.length - g.project(x, y)[0] - head.length / 2 < AT_LANE_END:
-            where = f"at the end of {normal}"
-    elif _lane_of(rmap, x, y, internal=True) is not None:
-        where = "in the junction"
-    if where is not None and not never_moved(head, f):
+    if front is not None:
+        where = f"for {front}"
+    else:
+        lane = _lane_at(rmap, x, y)
+        if lane is not None and lane.startswith(":"):
+            where = "in the junction"
+        elif lane is not None:
+            g = rmap.geom(lane)
+            if g.length - g.project(x, y)[0] - head.length / 2 < AT_LANE_END:
+                where = f"at the end of {lane}"
+    if where is not None:
         if head is lead:
             return f"{lead.id} waits {where}", None
         return f"{lead.id} queues behind {head.id}, which waits {where}", None
