@@ -64,6 +64,20 @@ def judge(sc: Scenario, ads=None, with_replay=False):
     return m, verdict
 
 
+def kept_case(tmp_path, name: str, net: str = NET):
+    """(scenario, execution) of a campaign's case kept as data in tests/data/NAME, run with every oracle."""
+    import shutil
+
+    from drivefuzz.oracle import OracleSettings
+    from drivefuzz.scenario.sumofiles import load_scenario
+
+    folder = tmp_path / name
+    shutil.copytree(Path(__file__).parent / "data" / name, folder)
+    shutil.copy(net, folder / Path(net).name)
+    sc = load_scenario(folder)
+    return sc, execute(sc, oracles=OracleSettings().instantiate())
+
+
 def rammer(start_pos=5.0):
     return Actor(id="v2", kind="vehicle", nav="linear", start_lane="A0B0_1", start_pos=start_pos, speed=8.0,
                  dest_edge="B0C0")
@@ -298,16 +312,7 @@ def test_a_queue_held_up_across_a_junction_by_parked_cars_is_ego(tmp_path):
     B2M2_2 for room beyond junction M2, where v2 stands behind the parked v3 and v0 on M2C2_2; the ego stands
     behind v4 for 60 s with B2M2_1 free. Filed as 'the queue ahead is itself blocked': the queue is followed
     across the junction to the first parked car in it (v3; the head, v0, is parked too)."""
-    import shutil
-
-    from drivefuzz.oracle import OracleSettings
-    from drivefuzz.scenario.sumofiles import load_scenario
-
-    folder = tmp_path / "incident"
-    shutil.copytree(Path(__file__).parent / "data" / "queue_behind_parked_cars", folder)
-    shutil.copy(NET, folder / "town.net.xml")
-    sc = load_scenario(folder)
-    ex = execute(sc, oracles=OracleSettings().instantiate())
+    sc, ex = kept_case(tmp_path, "queue_behind_parked_cars")
     m = ex.misbehaviors[0]
     assert (m.oracle, m.kind, m.frame) == ("immobility", "immobile", 1347)
     v = attribute(sc, ex.trace, m, load_roadmap(NET))
@@ -321,18 +326,10 @@ def test_a_car_that_enters_the_ring_without_yielding_is_at_fault(tmp_path):
     ring (ringEN_0 to ringNW_0, a major link) when v1 enters from Nin_0 (a minor link) at 7.4 m/s without
     yielding. SUMO first placed the ego on :rN_1_0, where the exit to Nout_0 overlaps the ring, so the ego's
     link was read as the exit, which no entry has to yield to: filed as the ego's fault."""
-    import shutil
-
-    from drivefuzz.oracle import OracleSettings
-    from drivefuzz.scenario.sumofiles import load_scenario
     from drivefuzz.triage.evidence import ego_link
 
     net = Path(NET).with_name("roundabout.net.xml")
-    folder = tmp_path / "finding"
-    shutil.copytree(Path(__file__).parent / "data" / "ring_entry_fails_to_yield", folder)
-    shutil.copy(net, folder / net.name)
-    sc = load_scenario(folder)
-    ex = execute(sc, oracles=OracleSettings().instantiate())
+    sc, ex = kept_case(tmp_path, "ring_entry_fails_to_yield", str(net))
     m = ex.misbehaviors[0]
     assert (m.oracle, m.kind, m.actors, m.frame) == ("collision", "vehicle", ("v1",), 141)
     rmap = load_roadmap(net)
@@ -600,16 +597,9 @@ def test_a_car_standing_in_the_junction_that_the_ego_creeps_into_is_the_egos(tmp
     v3 struck its front', and without the stationary rule as 'v3 entered junction B1 on red ('r' at 63.3 s)'
     (v3's entry read at the contact). v3 stood still for 57 s; the ego came to it, and the careful driver,
     waiting at the same line, does not touch it."""
-    import shutil
-
     from drivefuzz.oracle import OracleSettings
-    from drivefuzz.scenario.sumofiles import load_scenario
 
-    folder = tmp_path / "incident"
-    shutil.copytree(Path(__file__).parent / "data" / "creep_into_junction_car", folder)
-    shutil.copy(NET, folder / "town.net.xml")
-    sc = load_scenario(folder)
-    ex = execute(sc, oracles=OracleSettings().instantiate())
+    sc, ex = kept_case(tmp_path, "creep_into_junction_car")
     m = ex.misbehaviors[0]
     assert (m.oracle, m.kind, m.actors, m.frame) == ("collision", "vehicle", ("v3",), 1266)
 
