@@ -503,6 +503,21 @@ def test_a_lane_lost_on_ice_names_the_ice():
     assert v.reason.endswith(v.evidence["cause"])
 
 
+def test_sliding_on_ice_into_a_parked_car_names_the_ice():
+    """A parked car on A0B0_1 and, before it, 60 m of road at friction 0.05 (black ice: the sensors do not
+    see it). The ego brakes for the car and slides into it; so does the careful driver: the verdict says so,
+    and names the ice."""
+    from drivefuzz.scenario import Puddle
+
+    parked = Actor(id="v0", kind="vehicle", nav="immobile", start_lane="A0B0_1", start_pos=80.0, speed=0.0)
+    sc = scenario("A0B0_1", 10.0, "B0C0", 40.0, parked).model_copy(
+        update={"puddles": (Puddle(x=60.0, y=-4.8, length=60.0, width=4.0, friction=0.05),)})
+    m, v = judge(sc, with_replay=True)
+    assert (m.oracle, m.actors) == ("collision", ("v0",))
+    assert v.fault is Fault.OTHER and v.evidence["counterfactual"]["same_failure"]
+    assert v.evidence["cause"].startswith("friction 0.05 under the ego from ") and v.reason.endswith(v.evidence["cause"])
+
+
 # ------------------------------------------------------------------ the careful driver
 def _seeds():
     from drivefuzz.scenario.seed import list_seeds

@@ -163,26 +163,33 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
     # lane keeping on a dry, calm road, its failing too says nothing about avoidability (the rules decide);
     # lane keeping lost to ice or wind may have been unavoidable, which the replay can show
     oracle = misbehavior.oracle
-    cause = _slippery_or_windy(scenario, trace, f) if oracle == "lane_invasion" else None
-    settles = oracle not in NO_COUNTERFACTUAL or ev.replay_may_settle or cause is not None
+    slippery = _slippery(trace, f)
+    # what may make a lane impossible to keep: ice, or a strong crosswind
+    unkeepable = (slippery or _windy(scenario)) if oracle == "lane_invasion" else None
+    settles = oracle not in NO_COUNTERFACTUAL or ev.replay_may_settle or unkeepable is not None
     if verdict.fault is not Fault.OTHER and not ev.decided and replay is not None and settles:
         out = counterfactual(scenario, misbehavior, replay, verdict)
-        if cause is not None and out.fault is Fault.OTHER:  # say what made the road impossible to keep
+        cause = unkeepable if oracle == "lane_invasion" else slippery
+        if cause is not None and out.fault is Fault.OTHER:  # what the careful driver could not master either
             out = Attribution(out.fault, f"{out.reason}: {cause}", {**out.evidence, "cause": cause})
         return out
     return verdict
 
 
-def _slippery_or_windy(scenario, trace, f: int, window_s: float = 6.0) -> str | None:
-    """What may make a lane impossible to keep at ``f``: friction under an axle below 0.5 in the ``window_s``
-    seconds before ``f`` (a car that slid on ice may leave its lane seconds later, as its tyres regain grip),
-    or a crosswind of at least :data:`WINDY` m/s; None for a dry road in a breeze or calm."""
+def _slippery(trace, f: int, window_s: float = 6.0) -> str | None:
+    """Friction under an axle below 0.5 in the ``window_s`` seconds before ``f`` (a car that slid on ice may
+    leave its lane, or reach what it braked for, seconds later), described; None on grippy ground."""
     k0 = max(f - int(window_s / trace.step_length), 0)
     mu = np.fmin(trace["mu_front"][k0:f + 1], trace["mu_rear"][k0:f + 1])
     slippery = np.flatnonzero(mu < 0.5)  # NaN compares False
-    if len(slippery):
-        k = k0 + int(slippery[0])
-        return f"friction {float(np.nanmin(mu)):.2f} under the ego from {float(trace['t'][k]):.1f} s"
+    if not len(slippery):
+        return None
+    k = k0 + int(slippery[0])
+    return f"friction {float(np.nanmin(mu)):.2f} under the ego from {float(trace['t'][k]):.1f} s"
+
+
+def _windy(scenario) -> str | None:
+    """A crosswind of at least :data:`WINDY` m/s, described; None in a breeze or calm."""
     wind = scenario.weather.wind_speed
     return f"a crosswind of {wind:.1f} m/s" if wind >= WINDY else None
 
