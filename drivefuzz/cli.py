@@ -423,7 +423,7 @@ def _fuzz_config(config: dict[str, Any], config_file: str | None, cli: dict[str,
         feedback="random" if pick("no_feedback", False) else pick("feedback", "risk"),
         single_pass=pick("single_pass", False),
         continue_after_finding=pick("continue_after_finding", False), shrink=pick("shrink", 10), ads=ads,
-        reproduce_incidents=pick("report_all", False),  # incidents measured like the findings they count as
+        reproduce_incidents=bool(cli.get("report_all")),  # incidents measured like the findings they count as
         oracles=_oracle_settings(config, oracle_kv, no_oracle, source=config_file),
         mutation=MutationConfig.model_validate(config.get("mutation", {})),
         quality=QualityConfig.model_validate(config.get("quality", {})),

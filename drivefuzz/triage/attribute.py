@@ -163,13 +163,13 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
     # lane keeping on a dry, calm road, its failing too says nothing about avoidability (the rules decide);
     # lane keeping lost to ice or wind may have been unavoidable, which the replay can show
     oracle = misbehavior.oracle
-    slippery = _slippery(trace, f)
     # what may make a lane impossible to keep: ice, or a strong crosswind
-    unkeepable = (slippery or _windy(scenario)) if oracle == "lane_invasion" else None
+    unkeepable = (_slippery(trace, f) or _windy(scenario)) if oracle == "lane_invasion" else None
     settles = oracle not in NO_COUNTERFACTUAL or ev.replay_may_settle or unkeepable is not None
     if verdict.fault is not Fault.OTHER and not ev.decided and replay is not None and settles:
         out = counterfactual(scenario, misbehavior, replay, verdict)
-        cause = unkeepable if oracle == "lane_invasion" else slippery
+        cause = unkeepable if oracle == "lane_invasion" else (_slippery(trace, f) if out.fault is Fault.OTHER
+                                                               else None)
         if cause is not None and out.fault is Fault.OTHER:  # what the careful driver could not master either
             out = Attribution(out.fault, f"{out.reason}: {cause}", {**out.evidence, "cause": cause})
         return out

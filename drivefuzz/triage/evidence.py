@@ -178,12 +178,14 @@ def stopping_distance(v: float, mu: float) -> float:
 
 
 # ---------------------------------------------------------------------- junction links
-def _lane_of(rmap, x: float, y: float, internal: bool) -> str | None:
+def _lane_of(rmap, x: float, y: float, internal: bool | None = None) -> str | None:
+    """The passenger lane whose centre line is nearest (x, y), within 3 m: a junction's (``internal``), a
+    normal one (not ``internal``), or either (None)."""
     best = None
     for lane, dist in rmap.net.getNeighboringLanes(x, y, 3.0, includeJunctions=True):
         if not lane.allows("passenger"):
             continue
-        if lane.getID().startswith(":") != internal:
+        if internal is not None and lane.getID().startswith(":") != internal:
             continue
         if best is None or dist < best[1]:
             best = (lane.getID(), dist)
@@ -487,15 +489,6 @@ def _queue_ahead(trace, lead: Track, f: int, track, dt: float) -> tuple[list[Tra
     return chain, None
 
 
-def _lane_at(rmap, x: float, y: float) -> str | None:
-    """The passenger lane, normal or internal (a junction's), whose centre line is nearest (x, y), within 3 m."""
-    best = None
-    for lane, dist in rmap.net.getNeighboringLanes(x, y, 3.0, includeJunctions=True):
-        if lane.allows("passenger") and (best is None or dist < best[1]):
-            best = (lane.getID(), dist)
-    return best[0] if best else None
-
-
 def _queue(trace, rmap, lead: Track, f: int, track, dt: float) -> tuple[str | None, str | None]:
     """``(queue, root)`` for the stationary ``lead`` ahead of the ego, from the queue :func:`_queue_ahead`
     follows. ``root`` is the first car of it that never moved (a parked car; not the lead itself: that blocks
@@ -516,7 +509,7 @@ def _queue(trace, rmap, lead: Track, f: int, track, dt: float) -> tuple[str | No
     if front is not None:
         where = f"for {front}"
     else:
-        lane = _lane_at(rmap, x, y)
+        lane = _lane_of(rmap, x, y)  # normal or internal: whichever is nearest
         if lane is not None and lane.startswith(":"):
             where = "in the junction"
         elif lane is not None:
