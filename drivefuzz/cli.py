@@ -8,8 +8,10 @@ internal errors were found); 130 aborted by a second Ctrl-C.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import functools
+import gc
 import json
 import os
 import signal
@@ -44,10 +46,20 @@ def handle_errors(fn):
     return wrapper
 
 
+@functools.cache
+def _freeze_heap_at_exit() -> None:
+    """At interpreter exit, move every object to the permanent generation: the final collections of
+    the shutdown then skip the road map's hundred thousand objects instead of walking them (Berlin,
+    3,641 edges: 0.23 of a 1.4 s ``drivefuzz run``). Registered once per process; nothing is freed
+    earlier than before."""
+    atexit.register(gc.freeze)
+
+
 class _Main(click.Group):
     """The command group: click's usage errors in one line, like every other input error."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        _freeze_heap_at_exit()
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, **extra)
         try:

@@ -118,6 +118,25 @@ def test_junction_areas_from_the_cache_are_exact(net, tmp_path, monkeypatch):
         (_wkb(drivable), _wkb(walk), _wkb(grown))
 
 
+def test_lane_boxes_come_from_the_cache_and_a_malformed_entry_is_rebuilt(tmp_path, monkeypatch):
+    monkeypatch.setenv("DRIVEFUZZ_CACHE", str(tmp_path))
+    rmap = RoadMap(NETWORKS[-1])
+    x, y = rmap.geom(rmap.lanes()[0]).position(5.0)[:2]
+    cell = (int(math.floor(x / CELL)), int(math.floor(y / CELL)))
+    first = NetIndex(rmap)
+    want = [(l.id, i) for l, i in first.cell(*cell)]
+    assert want
+    key = first._key("lane-boxes")
+    stored = netcache.load(key)
+    assert stored["ids"].tolist() == first._lane_boxes()[0].tolist()
+    assert [(l.id, i) for l, i in NetIndex(rmap).cell(*cell)] == want  # from the entry
+    for ids, boxes in ((stored["ids"], stored["boxes"][:, :3]),  # a wrong shape
+                       (np.arange(len(stored["ids"])), stored["boxes"])):  # ids that are not strings
+        netcache.store(key, {"ids": ids, "boxes": boxes})
+        assert [(l.id, i) for l, i in NetIndex(rmap).cell(*cell)] == want
+        assert netcache.load(key)["boxes"].shape == stored["boxes"].shape  # rewritten whole
+
+
 def test_a_corrupt_or_foreign_cache_entry_is_rebuilt(tmp_path, monkeypatch):
     monkeypatch.setenv("DRIVEFUZZ_CACHE", str(tmp_path))
     rmap = RoadMap(NETWORKS[-1])
