@@ -169,3 +169,13 @@ def test_campaign_file_oracle_settings_are_named_as_the_files(tmp_path):
     camp = tmp_path / "camp.toml"
     camp.write_text(f'[matrix]\nnetworks = ["{TOWN}"]\n[oracles.speeding]\ntolerance = "x"\n')
     _one_line_error(*_invoke(["campaign", str(camp), "-o", str(tmp_path / "o")]), "camp.toml", "speeding.tolerance")
+
+
+def test_python_dash_m_drivefuzz_is_the_command(tmp_path):
+    import subprocess
+    import sys
+
+    p = subprocess.run([sys.executable, "-m", "drivefuzz", "run", str(tmp_path / "missing")],
+                       capture_output=True, text=True, timeout=60)
+    assert p.stdout == ""
+    _one_line_error(p.returncode, p.stderr, "missing", "no such scenario")
