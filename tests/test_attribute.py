@@ -341,6 +341,20 @@ def test_a_car_that_enters_the_ring_without_yielding_is_at_fault(tmp_path):
     assert v.reason == "the vehicle v1 came from Nin_0, a link that must yield, into the ego's right of way at rN"
 
 
+def test_following_a_slow_car_round_the_ring_is_being_held_up(tmp_path):
+    """A campaign's finding, kept as data (tests/data/held_up_on_the_ring): the ego follows v1, which drives
+    round the one-lane ring at 1.5 m/s, 9 m ahead, for 70 s, and times out. On the ring's 27 m radius v1 stood
+    1.5 m to the side of the ego's heading, so it was not seen as ahead in the ego's lane: filed as the ego's
+    fault, 'nothing else involved'."""
+    net = Path(NET).with_name("roundabout.net.xml")
+    sc, ex = kept_case(tmp_path, "held_up_on_the_ring", str(net))
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.kind) == ("mission", "timeout")
+    v = attribute(sc, ex.trace, m, load_roadmap(net))
+    assert v.fault is Fault.OTHER and v.evidence["leader"] == "v1", v.reason
+    assert v.reason.startswith("held up behind slower traffic (v1) for ") and v.evidence["held_share"] > 0.6
+
+
 def test_changing_lanes_into_a_car_alongside_is_ego():
     # the reference ADS's real bug: its route needs A0B0_2 (left turn at B0), and it changes lanes into
     # a car driving alongside it there
@@ -633,3 +647,36 @@ def test_a_car_standing_in_the_junction_that_the_ego_creeps_into_is_the_egos(tmp
     assert v.evidence["other_travelled"] == 0.0 < v.evidence["ego_travelled"] < 0.1, v.evidence
     assert v.fault is Fault.EGO, v.reason
     assert "struck the stationary vehicle v3 with its front" in v.reason and "careful driver avoided" in v.reason
+
+
+# ------------------------------------------------------------------ mission time-outs
+def _timed_out(weather, ads_options):
+    """The town route from A0B0 to C0D0 (47 s for the reference ADS, 49 s for the careful driver in clear
+    weather; 57 s and 66 s in fog 100 and rain 100) against a time limit of 52 s."""
+    from drivefuzz.scenario import Weather
+    from oracles.mission import MissionOracle
+
+    sc = scenario("A0B0_1", 10.0, "C0D0", 60.0, time_limit=52.0).model_copy(
+        update={"weather": Weather(**weather), "ads": AdsSpec(name="ego", options=ads_options)})
+
+    def run(s):
+        ex = execute(s, oracles=[MissionOracle()])
+        return ex.misbehaviors, ex.trace
+
+    misbehaviors, trace = run(sc)
+    assert [(m.oracle, m.kind) for m in misbehaviors] == [("mission", "timeout")]
+    m = misbehaviors[0]
+    return attribute(sc, trace, m, load_roadmap(NET)), attribute(sc, trace, m, load_roadmap(NET), replay=run)
+
+
+def test_a_time_out_in_fog_that_slows_the_careful_driver_too_is_other():
+    rules, v = _timed_out({"fog": 100.0, "rain": 100.0}, {})
+    assert rules.fault is Fault.EGO  # the rules alone cannot tell
+    assert v.fault is Fault.OTHER and v.evidence["counterfactual"]["same_failure"], v.reason
+    assert v.evidence["cause"] == "fog 100 and rain 100 limit the sensors to 12 m" and v.reason.endswith(v.evidence["cause"])
+
+
+def test_a_time_out_of_a_dawdling_ads_is_ego():
+    rules, v = _timed_out({}, {"cruise_speed": 2.0})
+    assert v.fault is Fault.EGO and v.reason.endswith("a careful driver avoided it"), v.reason
+    assert v.evidence["counterfactual"]["misbehaviors"] == [] and "cause" not in v.evidence

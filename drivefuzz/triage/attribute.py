@@ -40,7 +40,10 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   :mod:`ego.careful`). If it fails the same way (same oracle, same other party), the situation
   was unavoidable: ``other``. Not after a rule that found the ego's own fault (it entered on red;
   it stayed behind a stationary body with a lane free): the careful driver would share the one
-  (it does not overtake either) and never meet the other.
+  (it does not overtake either) and never meet the other. Lane keeping is replayed only on ice or in a
+  strong crosswind (the careful driver tracks its path as the reference does), and a mission time-out only
+  when the ego kept moving (fog, rain and ice slow a careful driver too, and a time limit too short for
+  the route holds for everyone); such an ``other`` verdict names the ice, the wind or the fog.
 
 Otherwise the verdict is ``ego`` with what the ego did; ``unclear`` when the trace lacks the
 evidence (the other party is not in it, the frame is outside it).
@@ -77,6 +80,7 @@ from drivefuzz.triage.evidence import (
     other_link,
     path_entry,
     ran_red,
+    sensor_range,
     sideways_into,
     signal_state,
     stopping_distance,
@@ -97,6 +101,8 @@ def _travelled(x: np.ndarray, y: np.ndarray) -> float:
 
 #: Oracles whose verdicts the counterfactual does not settle (see :func:`attribute`).
 NO_COUNTERFACTUAL = frozenset({"lane_invasion", "immobility", "mission"})
+#: [m] a sensor range below which fog and rain count as the cause of a slow journey.
+SHORT_SIGHT = 50.0
 #: [m] room a driver needs past a stationary body to merge back into a lane that leads on along the route.
 MERGE_ROOM = 20.0
 #: [m] how close the careful driver's replay must come to the event's place to say anything about it.
@@ -168,8 +174,11 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
     settles = oracle not in NO_COUNTERFACTUAL or ev.replay_may_settle or unkeepable is not None
     if verdict.fault is not Fault.OTHER and not ev.decided and replay is not None and settles:
         out = counterfactual(scenario, misbehavior, replay, verdict)
-        cause = unkeepable if oracle == "lane_invasion" else (_slippery(trace, f) if out.fault is Fault.OTHER
-                                                               else None)
+        cause = None
+        if oracle == "lane_invasion":
+            cause = unkeepable
+        elif out.fault is Fault.OTHER:
+            cause = _short_sight(scenario) if oracle == "mission" else _slippery(trace, f)
         if cause is not None and out.fault is Fault.OTHER:  # what the careful driver could not master either
             out = Attribution(out.fault, f"{out.reason}: {cause}", {**out.evidence, "cause": cause})
         return out
@@ -186,6 +195,17 @@ def _slippery(trace, f: int, window_s: float = 6.0) -> str | None:
         return None
     k = k0 + int(slippery[0])
     return f"friction {float(np.nanmin(mu)):.2f} under the ego from {float(trace['t'][k]):.1f} s"
+
+
+def _short_sight(scenario) -> str | None:
+    """Fog and rain that shorten the sensors' range below :data:`SHORT_SIGHT` m (a careful driver then
+    drives no faster than it can stop within what it sees), described; None in clear weather."""
+    w = scenario.weather
+    rng = sensor_range(w)
+    if rng >= SHORT_SIGHT:
+        return None
+    what = " and ".join(f"{name} {value:.0f}" for name, value in (("fog", w.fog), ("rain", w.rain)) if value > 0)
+    return f"{what} limit the sensors to {rng:.0f} m"
 
 
 def _windy(scenario) -> str | None:
@@ -500,6 +520,9 @@ class _Event:
                 share, leader = held
                 return self.other(f"held up behind slower traffic ({leader}) for {share:.0%} of the run",
                                   held_share=share, leader=leader)
+            # a moving ego, not held up: fog, rain and ice slow a careful driver too, and a time limit too
+            # short for the route holds for everyone, which its replay shows
+            self.replay_may_settle = self.mb.kind == "timeout"
             return self.ego(f"the ego did not reach its goal in time ({self.mb.oracle}/{self.mb.kind})")
         blocked = blocked_lanes(trace, self.rmap, f)
         if blocked is None:
