@@ -355,6 +355,46 @@ def test_following_a_slow_car_round_the_ring_is_being_held_up(tmp_path):
     assert v.reason.startswith("held up behind slower traffic (v1) for ") and v.evidence["held_share"] > 0.6
 
 
+def test_a_car_that_cuts_in_and_brakes_hard_is_at_fault(tmp_path):
+    """A campaign's finding, kept as data (tests/data/cut_in_then_brakes): v3 changes from D0D1_1 into the
+    ego's lane D0D1_2 less than a metre ahead of it and brakes hard for the cars that stand in that lane, on a
+    puddle of friction 0.31. The careful driver's replay was struck by a jaywalker first, so the verdict
+    was 'unclear' and the case was reported as a finding."""
+    sc, ex = kept_case(tmp_path, "cut_in_then_brakes")
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.kind, m.actors) == ("collision", "vehicle", ("v3",))
+    v = attribute(sc, ex.trace, m, load_roadmap(NET))
+    assert v.fault is Fault.OTHER, v.reason
+    assert v.reason.startswith("the vehicle v3 cut into the ego's lane 0.8 m ahead")
+    assert v.evidence["careful_gap"] <= 0.0 and v.evidence["mu"] == pytest.approx(0.31)
+    assert "3.0 m/s^2" in v.reason  # a careful driver brakes no harder than the puddle lets it
+
+
+@pytest.mark.parametrize("pos, speed, brake_after, rate", [(28.0, 24.0, 0.3, 9.0), (22.0, 26.0, 1.5, 4.0)])
+def test_a_cut_in_that_leaves_a_careful_driver_room_is_the_egos(pos, speed, brake_after, rate):
+    """A maneuver car on the highway overtakes the blind ego on the right, cuts into its lane and brakes:
+    the executor starts the lane change only with the gap the fairness rules ask for, so a careful driver
+    braking from the moment it came in keeps clear (the rule measures it: careful_gap > 0), and the careful
+    driver's replay does."""
+    from test_maneuver import highway, npc
+
+    from drivefuzz.scenario import Trigger
+
+    sc = highway(npc("hw0_0", pos, speed, Maneuver(time=0.3, action="lane_left", value=1.0),
+                     Maneuver(time=brake_after, action="speed", value=0.0, rate=rate, trigger=Trigger.AFTER)))
+
+    def run(s):
+        got = execute(s, oracles=[CollisionOracle()])
+        return got.misbehaviors, got.trace
+
+    ex = execute(sc, ads=BlindADS(), oracles=[CollisionOracle()])
+    m = ex.misbehaviors[0]
+    v = attribute(sc, ex.trace, m, load_roadmap(sc.network_path()), replay=run)
+    assert (m.actors, v.fault) == (("v0",), Fault.EGO), v.reason
+    assert v.evidence["careful_gap"] > 0.0 and v.evidence["entered_frame"] < m.frame
+    assert v.reason.endswith("a careful driver avoided it")
+
+
 def test_changing_lanes_into_a_car_alongside_is_ego():
     # the reference ADS's real bug: its route needs A0B0_2 (left turn at B0), and it changes lanes into
     # a car driving alongside it there

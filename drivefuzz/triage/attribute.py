@@ -14,15 +14,19 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   2. *rear*: the ego was struck in its rear half while lawfully in its lane (no lane change in
      the last :data:`LANE_CHANGE_WINDOW` seconds, no red light crossed) and it had not braked
      harder than :data:`COMFORT_DECEL` without a hazard ahead;
-  3. *right of way*: the other vehicle entered the junction on red, or from a link that must
+  3. *cut-in*: a vehicle moved into the ego's lane ahead of it (its body wholly outside the lane, then in it,
+     within :data:`CUT_IN_WINDOW` seconds) or alongside it, and a careful driver reacting
+     (``CAREFUL_REACTION``) and braking (``CAREFUL_DECEL``, less on low friction) from that moment would
+     still have reached where it went: the yardstick by which the mutator places cut-ins;
+  4. *right of way*: the other vehicle entered the junction on red, or from a link that must
      yield to the ego's (SUMO's junction logic: the response bits of the two connections),
      while the ego entered lawfully;
-  4. *pedestrian*: a pedestrian entered the ego's path (or walked into its side) closer than the
+  5. *pedestrian*: a pedestrian entered the ego's path (or walked into its side) closer than the
      distance the ego needed to stop: reaction time plus braking at the grip under it
      (``min(mu g, max brake)``), counted from the later of the moment it entered the path and
      the moment the ego could see it (sensor range shortened by fog and rain, field of view,
      line of sight past other vehicles);
-  5. *blocked* (immobility and mission): every lane the ego may lawfully use is blocked ahead by a
+  6. *blocked* (immobility and mission): every lane the ego may lawfully use is blocked ahead by a
      stationary body (in a junction: the body right ahead), a pedestrian stands in its lane ahead,
      or the ego waits in a queue that will move (no parked car in it, and its head waits at the end of
      its lane, in a junction, or for a body ahead of it); a mission time-out while the ego spent most
@@ -30,7 +34,7 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
      the careful driver does not overtake either), also when cars queue between the ego and that
      body (a parked car in the queue, or a car stalled in mid-lane at its head: it will not move).
 
-  Rules 1-3 excuse the ego only for a body that came to it: one that moved in the last
+  Rules 1-4 excuse the ego only for a body that came to it: one that moved in the last
   :data:`APPROACH_WINDOW` seconds (farther than the stationary speed takes a body, or farther than
   the ego). An ego that crept (below the stationary speed) into a parked car, or drove into a car
   that stood in a junction it had entered on red, struck it.
@@ -60,9 +64,10 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from drivefuzz.scenario.model import EGO_LENGTH, EGO_WIDTH, AdsSpec
+from drivefuzz.scenario.model import CAREFUL_DECEL, CAREFUL_REACTION, EGO_LENGTH, EGO_WIDTH, AdsSpec
 from drivefuzz.triage.evidence import (
     COMFORT_DECEL,
+    G,
     RED,
     STATIONARY_SPEED,
     Track,
@@ -70,6 +75,7 @@ from drivefuzz.triage.evidence import (
     blocked_lanes,
     contact_point,
     contact_side,
+    cut_in,
     ego_link,
     first_visible,
     frames_before,
@@ -90,6 +96,8 @@ from drivefuzz.triage.evidence import (
 
 #: [s] before a contact, over which the rules that excuse a struck ego look for the other body's approach.
 APPROACH_WINDOW = 2.0
+#: [s] before a contact, over which a vehicle that moved into the ego's lane counts as cutting in.
+CUT_IN_WINDOW = 4.0
 
 
 def _travelled(x: np.ndarray, y: np.ndarray) -> float:
@@ -302,7 +310,8 @@ class _Event:
                 return self.ego(f"the ego changed lanes into the vehicle {oth.id} alongside (it moved {moved[0]:.1f} m "
                                 f"sideways towards it, {oth.id} {round(moved[1], 1) + 0.0:.1f} m)", decided=True,
                                 ego_sideways=moved[0], other_sideways=moved[1])
-        for rule in (self.rule_stationary, self.rule_rear, self.rule_right_of_way, self.rule_pedestrian):
+        for rule in (self.rule_stationary, self.rule_rear, self.rule_cut_in, self.rule_right_of_way,
+                     self.rule_pedestrian):
             verdict = rule(oth, point, side, red)
             if verdict is not None:
                 return verdict
@@ -375,6 +384,36 @@ class _Event:
         return self.other(f"the vehicle {oth.id} struck the ego's rear half at {dv:.1f} m/s faster while the ego "
                           f"drove lawfully in its lane, braking at most {max(peak, 0.0):.1f} m/s^2{why}",
                           peak_decel=peak, hazard=hazard)
+
+    def rule_cut_in(self, oth: Track, point, side: str, red) -> Attribution | None:
+        """A vehicle moved into the ego's lane ahead of it (or alongside), and a careful driver, braking
+        from when it came in, could not have kept clear of where it then went."""
+        trace, f = self.trace, self.f
+        if oth.kind != "vehicle" or point is None or point[0] < 0.0 or red is not None:
+            return None
+        if not self._came_to_ego(oth):
+            return None
+        entry = cut_in(trace, self.rmap, oth, f, CUT_IN_WINDOW)
+        if entry is None:
+            return None
+        k = entry.entered
+        t = trace["t"][k:f + 1] - trace["t"][k]
+        v0 = float(trace["speed"][k])
+        mu = float(np.nanmin(np.fmin(trace["mu_front"][k:f + 1], trace["mu_rear"][k:f + 1])))
+        decel = min(CAREFUL_DECEL, max(min(mu, 1.0), 0.05) * G)
+        braking = np.clip(t - CAREFUL_REACTION, 0.0, v0 / decel)
+        careful_s = entry.ego_s[0] + v0 * np.minimum(t, CAREFUL_REACTION) + v0 * braking - 0.5 * decel * braking ** 2
+        reach = 0.5 * (float(oth.length) + EGO_LENGTH)
+        gap0 = float(entry.other_s[0] - entry.ego_s[0]) - reach
+        closest = float(np.min(entry.other_s - careful_s)) - reach
+        ev = dict(entered_frame=k, gap=round(gap0, 3), speed_then=v0, careful_gap=round(closest, 3), mu=mu)
+        if closest > 0.0:
+            self.base.update(ev)
+            return None
+        how = (f"moved into the ego's lane alongside it" if gap0 < 0.0 else
+               f"cut into the ego's lane {gap0:.1f} m ahead at {float(trace['t'][k]):.1f} s")
+        return self.other(f"the vehicle {oth.id} {how}; braking {CAREFUL_REACTION:.2f} s later at {decel:.1f} "
+                          f"m/s^2, a careful driver could not have kept clear of it", **ev)
 
     def _ego_must_yield_to(self, oth: Track) -> bool:
         mine = ego_link(self.trace, self.rmap, self.f)

@@ -166,6 +166,53 @@ def sideways_into(trace, rmap, oth: Track, f: int, side: str, seconds: float = 1
     return None
 
 
+@dataclass(frozen=True)
+class CutIn:
+    """A vehicle that moved into the ego's lane ahead of it: from frame ``entered`` (the first of the last run
+    of frames in which its body overlapped the lane) to the event, both bodies' centres along the lane [m]."""
+
+    entered: int
+    ego_s: np.ndarray  # [m] along the lane, frames entered..f
+    other_s: np.ndarray
+    overlap: float  # [m] how far its body reached into the lane at the event
+
+
+def cut_in(trace, rmap, oth: Track, f: int, seconds: float = 4.0) -> CutIn | None:
+    """How ``oth`` came into the ego's lane within ``seconds`` before ``f``, measured on the normal lane the
+    ego was on at ``f`` (and stayed on since the window began, or since it entered that lane): None unless its
+    body was wholly outside the lane at some frame and overlapped it from a later frame up to ``f``, with its
+    centre ahead of the ego's then."""
+    lane = str(trace["lane"][f])
+    if not lane or lane.startswith(":") or not rmap.has_lane(lane):
+        return None
+    w = frames_before(trace, f, seconds)
+    k0 = w.start
+    lanes = trace["lane"]
+    while k0 < f and str(lanes[k0]) != lane:  # frames before the ego came onto the lane are measured elsewhere
+        k0 += 1
+    if any(str(lanes[k]) != lane for k in range(k0, f + 1)):
+        return None
+    g = rmap.geom(lane)
+    half_lane = 0.5 * g.width
+    inside, ego_s, other_s, overlap = [], [], [], 0.0
+    for k in range(k0, f + 1):
+        if not oth.present(k):
+            return None
+        s_o, lat = g.project(float(oth.x[k]), float(oth.y[k]))
+        s_e, _ = g.project(float(trace["x"][k]), float(trace["y"][k]))
+        overlap = half_lane + 0.5 * oth.width - abs(lat)  # [m] of its body across the lane's edge
+        inside.append(overlap > 0.0)
+        ego_s.append(s_e)
+        other_s.append(s_o)
+    if all(inside) or not inside[-1]:
+        return None
+    last_out = max(i for i, v in enumerate(inside) if not v)
+    i_in = last_out + 1
+    if other_s[i_in] <= ego_s[i_in]:
+        return None
+    return CutIn(k0 + i_in, np.asarray(ego_s[i_in:]), np.asarray(other_s[i_in:]), overlap)
+
+
 def sensor_range(weather) -> float:
     """[m] the reference sensors' range in this weather (fog and rain shorten it; 12 m all round)."""
     return max(100.0 * (1.0 - 0.85 * weather.fog / 100.0) * (1.0 - 0.4 * weather.rain / 100.0), 12.0)
