@@ -494,6 +494,8 @@ def _print_summary(campaign, findings, out_dir, report_all: bool = False) -> Non
     click.echo(f"{p.execs} executions ({p.new_execs} in this run, {p.rate:.2f}/s); {len(findings)} finding(s) "
                f"and {len(incidents)} incident(s), one per signature; output in {out_dir}")
     _print_findings("findings (the ego's fault)" if findings else "", findings)
+    if len(findings) > 1:
+        _print_groups(findings)
     if incidents:
         _print_findings("incidents (not the ego's fault" + (", reported as findings by --report-all)" if report_all
                         else "; kept apart, --report-all counts them)"), incidents)
@@ -520,6 +522,20 @@ def _print_findings(title: str, findings) -> None:
         rate = f"{rep['reproduced']}/{rep['runs']} {'robust' if rep.get('robust') else 'knife-edge'}" if rep else "-"
         click.echo(f"{i:>3} {f.hits:>5}  {rate:<16} {when}  {f.label}")
         click.echo(f"{'':>38}{replay_command(f.path, f.ads)}")
+
+
+def _print_groups(findings) -> None:
+    """The likely bugs behind the findings: those one attribution rule blamed on the ego, by oracle and kind."""
+    from types import SimpleNamespace
+
+    from drivefuzz.triage.table import format_groups
+
+    rows = []
+    for i, f in enumerate(findings):
+        att = f.attribution or {}
+        rows.append(SimpleNamespace(number=i, hits=f.hits, verdict=f"{f.misbehavior.oracle}/{f.misbehavior.kind}",
+                                    fault=str(att.get("fault", "")), rule=str(att.get("rule", ""))))
+    click.echo(format_groups(rows))
 
 
 def _seed_folder(network: Path, name: str, seeds_dir: str | None, seeds_root: Path | None) -> Path:
@@ -908,7 +924,7 @@ def ads_cmd():
 @handle_errors
 def findings_cmd(out, as_json, incidents):
     """List a campaign's findings, numbered in the order they were first found (exit 0: a listing)."""
-    from drivefuzz.triage.table import finding_rows, format_table, read_executions, check_campaign_dir
+    from drivefuzz.triage.table import check_campaign_dir, finding_rows, format_groups, format_table, read_executions
 
     execs = read_executions(check_campaign_dir(out))
     rows = finding_rows(out, executions=execs)
@@ -917,6 +933,8 @@ def findings_cmd(out, as_json, incidents):
         click.echo(json.dumps([r.as_json() for r in rows + extra], indent=2))
         return
     click.echo(format_table(rows, "findings (the ego's fault)"))
+    if len(rows) > 1:
+        click.echo(format_groups(rows))
     if incidents:
         click.echo(format_table(extra, "incidents (not the ego's fault)"))
 

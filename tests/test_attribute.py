@@ -339,6 +339,7 @@ def test_a_car_that_enters_the_ring_without_yielding_is_at_fault(tmp_path):
     v = attribute(sc, ex.trace, m, rmap)
     assert v.fault is Fault.OTHER, v.reason
     assert v.reason == "the vehicle v1 came from Nin_0, a link that must yield, into the ego's right of way at rN"
+    assert v.rule == "other_failed_to_yield" and v.as_dict()["rule"] == v.rule
 
 
 def test_following_a_slow_car_round_the_ring_is_being_held_up(tmp_path):
@@ -351,7 +352,7 @@ def test_following_a_slow_car_round_the_ring_is_being_held_up(tmp_path):
     m = ex.misbehaviors[0]
     assert (m.oracle, m.kind) == ("mission", "timeout")
     v = attribute(sc, ex.trace, m, load_roadmap(net))
-    assert v.fault is Fault.OTHER and v.evidence["leader"] == "v1", v.reason
+    assert v.fault is Fault.OTHER and v.evidence["leader"] == "v1" and v.rule == "held_up", v.reason
     assert v.reason.startswith("held up behind slower traffic (v1) for ") and v.evidence["held_share"] > 0.6
 
 
@@ -365,7 +366,7 @@ def test_a_car_that_cuts_in_and_brakes_hard_is_at_fault(tmp_path):
     assert (m.oracle, m.kind, m.actors) == ("collision", "vehicle", ("v3",))
     v = attribute(sc, ex.trace, m, load_roadmap(NET))
     assert v.fault is Fault.OTHER, v.reason
-    assert v.reason.startswith("the vehicle v3 cut into the ego's lane 0.8 m ahead")
+    assert v.reason.startswith("the vehicle v3 cut into the ego's lane 0.8 m ahead") and v.rule == "cut_in"
     assert v.evidence["careful_gap"] <= 0.0 and v.evidence["mu"] == pytest.approx(0.31)
     assert "3.0 m/s^2" in v.reason  # a careful driver brakes no harder than the puddle lets it
 
@@ -711,7 +712,8 @@ def _timed_out(weather, ads_options):
 
 def test_a_time_out_in_fog_that_slows_the_careful_driver_too_is_other():
     rules, v = _timed_out({"fog": 100.0, "rain": 100.0}, {})
-    assert rules.fault is Fault.EGO  # the rules alone cannot tell
+    assert rules.fault is Fault.EGO and rules.rule == "slow"  # the rules alone cannot tell
+    assert v.rule == "slow"  # the replay keeps the rule whose verdict it tested
     assert v.fault is Fault.OTHER and v.evidence["counterfactual"]["same_failure"], v.reason
     assert v.evidence["cause"] == "fog 100 and rain 100 limit the sensors to 12 m" and v.reason.endswith(v.evidence["cause"])
 
@@ -720,3 +722,22 @@ def test_a_time_out_of_a_dawdling_ads_is_ego():
     rules, v = _timed_out({}, {"cruise_speed": 2.0})
     assert v.fault is Fault.EGO and v.reason.endswith("a careful driver avoided it"), v.reason
     assert v.evidence["counterfactual"]["misbehaviors"] == [] and "cause" not in v.evidence
+
+
+def test_every_rule_a_verdict_names_is_described():
+    """A verdict's rule names the class of bug the report groups findings by: each one the rules can give has
+    its description in RULES, and each description is used."""
+    import inspect
+    import re
+
+    from drivefuzz.triage import attribute as attribute_module
+    from drivefuzz.triage.attribute import RULES, bug_class
+
+    source = inspect.getsource(attribute_module)
+    named = set(re.findall(r'self\.(?:ego|other)\(\s*"(\w+)"', source))
+    named |= set(re.findall(r'Attribution\(Fault\.\w+, [^\n]*"(\w+)"\)$', source, re.M))
+    named |= set(re.findall(r'\{"frame": misbehavior\.frame\}, "(\w+)"', source))
+    assert named == set(RULES), (named ^ set(RULES))
+    assert bug_class("collision/vehicle", "ego", "failed_to_yield") == (
+        "collision/vehicle|ego|failed_to_yield", "collision/vehicle: it did not yield where its link must yield")
+    assert bug_class("collision/vehicle", "ego", "") == ("collision/vehicle|ego", "collision/vehicle")

@@ -76,6 +76,11 @@ def test_report_is_one_self_contained_file_with_a_card_per_signature(campaign, t
     for folder in folders:
         assert f"`{folder}`" in md
     assert "speeding" in md and "data:" not in md
+    n_findings = sum(f.startswith("findings/") for f in folders)
+    # more than one finding: they are grouped into likely bugs, in both files
+    assert ("## Likely bugs" in md and "<h2>Likely bugs</h2>" in html) is (n_findings > 1)
+    if n_findings > 1:
+        assert "| speeding/speeding: its own driving |" in md
     # every finding was shrunk during the campaign: its card and section show the minimal reproducer
     for folder in (f for f in folders if f.startswith("findings/")):
         assert f"drivefuzz replay {out / folder / 'minimal'}" in md
@@ -99,6 +104,32 @@ def test_findings_rows_match_the_folders_and_are_numbered_by_first_hit(campaign)
             assert r["replay"].startswith("drivefuzz replay ") and r["folder"] in r["replay"]
     text = _invoke("findings", out)
     assert all(r["folder"] in text for r in rows if not r["incident"])
+    from drivefuzz.triage.attribute import RULES
+
+    findings = [r for r in rows if not r["incident"]]
+    assert all(r["rule"] in RULES for r in rows)
+    if len(findings) > 1:  # the speeding ADS: every finding is its own driving, one likely bug
+        classes = {(r["verdict"], r["fault"], r["rule"]) for r in findings}
+        assert f"likely bugs: {len(classes)} " in text
+        assert "speeding/speeding: its own driving" in text
+
+
+def test_findings_group_by_the_rule_that_blamed_the_ego():
+    from drivefuzz.triage.table import FindingRow, bug_groups
+
+    def row(n, verdict, rule, hits=1, fault="ego"):
+        return FindingRow(number=n, folder=f"findings/{n}", signature=str(n), label="x", verdict=verdict, fault=fault,
+                          reason="x", hits=hits, reproduced=None, runs=None, robust=None, first_exec=n, first_key="-",
+                          first_time_s=None, sim_time_s=None, replay="-", rule=rule)
+
+    rows = [row(0, "red_light/red", "own_driving"), row(1, "collision/vehicle", "failed_to_yield", hits=3),
+            row(2, "collision/vehicle", "struck"), row(3, "collision/vehicle", "failed_to_yield"),
+            row(4, "collision/vehicle", "", hits=2), row(5, "collision/vehicle", "unknown-rule")]
+    groups = bug_groups(rows)
+    assert [[r.number for r in g.rows] for g in groups] == [[1, 3], [4, 5], [0], [2]]
+    assert groups[0].title == "collision/vehicle: it did not yield where its link must yield" and groups[0].hits == 4
+    assert groups[1].title == "collision/vehicle"  # verdicts filed before rules were recorded: oracle and kind
+    assert groups[0].line().endswith("(#1 #3)")
 
 
 def test_numbering_follows_the_index_not_the_folder_names(campaign, tmp_path):

@@ -130,16 +130,60 @@ class Fault(str, Enum):
     UNCLEAR = "unclear"
 
 
+#: The rules, by the name a verdict records (``Attribution.rule``), with what each says happened. Findings
+#: of one oracle and kind that one rule blamed on the ego are likely one bug of the ADS, however their
+#: signatures differ (a roundabout entry not yielded to, with the ego going straight or right, the other car
+#: an autopilot or a linear one, struck front or side): the report and the summaries group them so.
+RULES: dict[str, str] = {
+    # the ego's fault
+    "own_driving": "its own driving",
+    "obstacle": "it drove into a static obstacle",
+    "lane_change_into": "it moved sideways into a vehicle alongside",
+    "ran_red": "it entered a junction on red and hit someone",
+    "failed_to_yield": "it did not yield where its link must yield",
+    "struck": "it struck another road user",
+    "slow": "it did not reach its goal in time",
+    "no_blocker": "it stood still with nothing in its way",
+    "stayed_behind": "it stayed behind a stationary body with a lane free",
+    "stood_still": "it stood still with a lane free",
+    # another's
+    "stationary_struck": "it was struck while standing still",
+    "rear_ended": "it was struck from behind while driving lawfully",
+    "cut_in": "a vehicle cut in closer than a careful driver can brake for",
+    "other_ran_red": "another vehicle entered the junction on red",
+    "other_failed_to_yield": "another vehicle did not yield",
+    "pedestrian": "a pedestrian stepped out too close, unseen, or into its side",
+    "held_up": "slower traffic held it up",
+    "pedestrian_in_lane": "a pedestrian stood in its lane",
+    "blocked": "every lawful way on was blocked",
+    "queue": "it waited in a queue that will move",
+    # neither
+    "no_evidence": "the trace lacks the evidence",
+}
+
+
+def bug_class(verdict: str, fault: str, rule: str) -> tuple[str, str]:
+    """(key, title) of the likely bug behind a finding: its oracle/kind (``verdict``), fault and rule. A verdict
+    that names no rule (one filed before verdicts recorded theirs) is a class of its oracle and kind alone."""
+    what = RULES.get(rule)
+    if what is None:
+        return f"{verdict}|{fault}", verdict
+    return f"{verdict}|{fault}|{rule}", f"{verdict}: {what}"
+
+
 @dataclass(frozen=True)
 class Attribution:
-    """A verdict, the one-line reason a reader can check, and its evidence (JSON-safe)."""
+    """A verdict, the one-line reason a reader can check, its evidence (JSON-safe), and the name of the rule
+    that gave it (a key of :data:`RULES`; the counterfactual keeps the rule whose verdict it tested)."""
 
     fault: Fault
     reason: str
     evidence: Mapping[str, Any] = field(default_factory=dict)
+    rule: str = ""
 
     def as_dict(self) -> dict[str, Any]:
-        return {"fault": self.fault.value, "reason": self.reason, "evidence": _json_safe(self.evidence)}
+        return {"fault": self.fault.value, "reason": self.reason, "rule": self.rule,
+                "evidence": _json_safe(self.evidence)}
 
 
 def _json_safe(v):
@@ -169,7 +213,7 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
     """
     n = trace.n_frames
     if n == 0:
-        return Attribution(Fault.UNCLEAR, "the trace is empty", {"frame": misbehavior.frame})
+        return Attribution(Fault.UNCLEAR, "the trace is empty", {"frame": misbehavior.frame}, "no_evidence")
     f = min(max(int(misbehavior.frame), 0), n - 1)
     ev = _Event(scenario, trace, misbehavior, rmap, f)
     verdict = ev.judge()
@@ -188,7 +232,7 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
         elif out.fault is Fault.OTHER:
             cause = _short_sight(scenario) if oracle == "mission" else _slippery(trace, f)
         if cause is not None and out.fault is Fault.OTHER:  # what the careful driver could not master either
-            out = Attribution(out.fault, f"{out.reason}: {cause}", {**out.evidence, "cause": cause})
+            out = Attribution(out.fault, f"{out.reason}: {cause}", {**out.evidence, "cause": cause}, out.rule)
         return out
     return verdict
 
@@ -243,15 +287,15 @@ def counterfactual(scenario, misbehavior, replay: Replay, verdict: Attribution) 
     if same:
         m = same[0]
         return Attribution(Fault.OTHER, f"a careful driver could not avoid it either ({m.oracle}/{m.kind} "
-                                        f"at {m.time:.1f} s)", evidence)
+                                        f"at {m.time:.1f} s)", evidence, verdict.rule)
     earlier = [m for m in others if m.time <= misbehavior.time]
     if _trace is None or earlier or not _reached(_trace, misbehavior.position):
         # it never got there: the replay says nothing about this event
         what = (f"{earlier[0].oracle}/{earlier[0].kind} at {earlier[0].time:.1f} s" if earlier else
                 "did not run" if _trace is None else "never came near the place")
         return Attribution(Fault.UNCLEAR, verdict.reason + f"; the careful driver's replay failed first ({what})",
-                           evidence)
-    return Attribution(verdict.fault, verdict.reason + "; a careful driver avoided it", evidence)
+                           evidence, verdict.rule)
+    return Attribution(verdict.fault, verdict.reason + "; a careful driver avoided it", evidence, verdict.rule)
 
 
 class _Event:
@@ -269,12 +313,12 @@ class _Event:
         self.base = {"frame": f, "time": round(float(trace["t"][f]), 3), "ego_speed": self.v,
                      "ego_lane": str(trace["lane"][f])}
 
-    def other(self, reason: str, **evidence) -> Attribution:
-        return Attribution(Fault.OTHER, reason, {**self.base, **evidence})
+    def other(self, rule: str, reason: str, **evidence) -> Attribution:
+        return Attribution(Fault.OTHER, reason, {**self.base, **evidence}, rule)
 
-    def ego(self, reason: str, decided: bool = False, **evidence) -> Attribution:
+    def ego(self, rule: str, reason: str, decided: bool = False, **evidence) -> Attribution:
         self.decided = decided
-        return Attribution(Fault.EGO, reason, {**self.base, **evidence})
+        return Attribution(Fault.EGO, reason, {**self.base, **evidence}, rule)
 
     def judge(self) -> Attribution:
         oracle = self.mb.oracle
@@ -284,21 +328,21 @@ class _Event:
             return self.standstill()
         # a red light or the speed limit binds whatever the others do; lane keeping may be lost to wind
         # or ice, which the counterfactual can show
-        return self.ego(f"the ego's own driving: {oracle}/{self.mb.kind}",
+        return self.ego("own_driving", f"the ego's own driving: {oracle}/{self.mb.kind}",
                         decided=oracle in ("red_light", "speeding"))
 
     # ------------------------------------------------------------------ collisions
     def collision(self) -> Attribution:
         mb, trace, f = self.mb, self.trace, self.f
         if mb.kind == "obstacle":
-            return self.ego(f"the ego drove into the static obstacle {mb.actors[0] if mb.actors else '?'} at "
+            return self.ego("obstacle", f"the ego drove into the static obstacle {mb.actors[0] if mb.actors else '?'} at "
                             f"{self.v:.1f} m/s", other=list(mb.actors))
         if not mb.actors:
-            return Attribution(Fault.UNCLEAR, "the collision names no other party", dict(self.base))
+            return Attribution(Fault.UNCLEAR, "the collision names no other party", dict(self.base), "no_evidence")
         oth = actor_track(trace, mb.actors[0])
         if oth is None or not oth.present(f):
             return Attribution(Fault.UNCLEAR, f"{mb.actors[0]} is not in the trace at the contact",
-                               {**self.base, "other": mb.actors[0]})
+                               {**self.base, "other": mb.actors[0]}, "no_evidence")
         point = contact_point(trace, f, oth)
         side = contact_side(point)
         self.base.update(other=oth.id, other_kind=oth.kind, other_speed=float(oth.speed[f]), contact_side=side,
@@ -307,7 +351,7 @@ class _Event:
         if self.rule_stationary(oth, point, side, red) is None and side in ("left", "right") and oth.kind == "vehicle":
             moved = sideways_into(trace, self.rmap, oth, f, side)
             if moved is not None:
-                return self.ego(f"the ego changed lanes into the vehicle {oth.id} alongside (it moved {moved[0]:.1f} m "
+                return self.ego("lane_change_into", f"the ego changed lanes into the vehicle {oth.id} alongside (it moved {moved[0]:.1f} m "
                                 f"sideways towards it, {oth.id} {round(moved[1], 1) + 0.0:.1f} m)", decided=True,
                                 ego_sideways=moved[0], other_sideways=moved[1])
         for rule in (self.rule_stationary, self.rule_rear, self.rule_cut_in, self.rule_right_of_way,
@@ -316,16 +360,16 @@ class _Event:
             if verdict is not None:
                 return verdict
         if red is not None:
-            return self.ego(f"the ego entered the junction on red (frame {red}) and hit {oth.id}", decided=True,
+            return self.ego("ran_red", f"the ego entered the junction on red (frame {red}) and hit {oth.id}", decided=True,
                             red_frame=red)
         if oth.kind == "vehicle" and self._ego_must_yield_to(oth):
             mine = ego_link(trace, self.rmap, f)
-            return self.ego(f"the ego did not yield to the vehicle {oth.id} at {mine.getJunction().getID()}: its link "
+            return self.ego("failed_to_yield", f"the ego did not yield to the vehicle {oth.id} at {mine.getJunction().getID()}: its link "
                             f"from {mine.getFromLane().getID()} must yield", decided=True,
                             ego_from=mine.getFromLane().getID())
         still = float(np.nanmax(oth.speed[frames_before(trace, f, 2.0)])) <= STATIONARY_SPEED
         what = f"stationary {oth.kind}" if still else oth.kind
-        return self.ego(f"the ego struck the {what} {oth.id} with its {side} at {self.v:.1f} m/s")
+        return self.ego("struck", f"the ego struck the {what} {oth.id} with its {side} at {self.v:.1f} m/s")
 
     def rule_stationary(self, oth: Track, point, side: str, red) -> Attribution | None:
         trace, f = self.trace, self.f
@@ -336,7 +380,7 @@ class _Event:
         # chatter) struck it, whatever its speedometer said
         if not self._came_to_ego(oth):
             return None
-        return self.other(f"the ego was stationary ({self.v:.2f} m/s) when the {oth.kind} {oth.id} struck its {side}")
+        return self.other("stationary_struck", f"the ego was stationary ({self.v:.2f} m/s) when the {oth.kind} {oth.id} struck its {side}")
 
     def _came_to_ego(self, oth: Track) -> bool:
         """Whether the other body moved in the last :data:`APPROACH_WINDOW` seconds: farther than the
@@ -381,7 +425,7 @@ class _Event:
             hazard = None
         dv = float(oth.speed[f]) - self.v
         why = f" (it braked for {hazard})" if hazard else ""
-        return self.other(f"the vehicle {oth.id} struck the ego's rear half at {dv:.1f} m/s faster while the ego "
+        return self.other("rear_ended", f"the vehicle {oth.id} struck the ego's rear half at {dv:.1f} m/s faster while the ego "
                           f"drove lawfully in its lane, braking at most {max(peak, 0.0):.1f} m/s^2{why}",
                           peak_decel=peak, hazard=hazard)
 
@@ -412,7 +456,7 @@ class _Event:
             return None
         how = (f"moved into the ego's lane alongside it" if gap0 < 0.0 else
                f"cut into the ego's lane {gap0:.1f} m ahead at {float(trace['t'][k]):.1f} s")
-        return self.other(f"the vehicle {oth.id} {how}; braking {CAREFUL_REACTION:.2f} s later at {decel:.1f} "
+        return self.other("cut_in", f"the vehicle {oth.id} {how}; braking {CAREFUL_REACTION:.2f} s later at {decel:.1f} "
                           f"m/s^2, a careful driver could not have kept clear of it", **ev)
 
     def _ego_must_yield_to(self, oth: Track) -> bool:
@@ -457,7 +501,7 @@ class _Event:
             shift = next((s.shift for s in self.scenario.signals if s.tls == tls), 0.0)
             state = signal_state(str(self.rmap.path), tls, conn.getTLLinkIndex(), t_in, shift)
             if state is not None and state in RED:
-                return self.other(f"the vehicle {oth.id} entered junction {conn.getJunction().getID()} on red "
+                return self.other("other_ran_red", f"the vehicle {oth.id} entered junction {conn.getJunction().getID()} on red "
                                   f"({state!r} at {t_in:.1f} s) and struck the ego's {side}",
                                   other_signal=state, **ev)
         mine = ego_link(self.trace, self.rmap, self.f)
@@ -470,7 +514,7 @@ class _Event:
         except (IndexError, KeyError, AttributeError):
             return None
         if other_yields and not ego_yields:
-            return self.other(f"the vehicle {oth.id} came from {conn.getFromLane().getID()}, a link that must yield, "
+            return self.other("other_failed_to_yield", f"the vehicle {oth.id} came from {conn.getFromLane().getID()}, a link that must yield, "
                               f"into the ego's right of way at {node.getID()}",
                               ego_from=mine.getFromLane().getID(), **ev)
         return None
@@ -481,12 +525,12 @@ class _Event:
         trace, f = self.trace, self.f
         k_in = path_entry(trace, oth, f)
         if side in ("left", "right") and k_in is None:
-            return self.other(f"the pedestrian {oth.id} walked into the ego's {side} side")
+            return self.other("pedestrian", f"the pedestrian {oth.id} walked into the ego's {side} side")
         if k_in is None:
             return None
         k_vis = first_visible(trace, oth, f, self.scenario)
         if k_vis is None:
-            return self.other(f"the pedestrian {oth.id} was never visible before it was struck",
+            return self.other("pedestrian", f"the pedestrian {oth.id} was never visible before it was struck",
                               entered_frame=k_in)
         k0 = max(k_in, k_vis)
         v = float(trace["speed"][k0])
@@ -495,7 +539,7 @@ class _Event:
         need = stopping_distance(v, mu)
         ev = dict(entered_frame=k_in, visible_frame=k_vis, gap=gap, speed_then=v, mu=mu, stopping_distance=need)
         if gap < need:
-            return self.other(f"the pedestrian {oth.id} entered the ego's path {gap:.1f} m ahead at {v:.1f} m/s; "
+            return self.other("pedestrian", f"the pedestrian {oth.id} entered the ego's path {gap:.1f} m ahead at {v:.1f} m/s; "
                               f"stopping needed {need:.1f} m (mu {mu:.2f})", **ev)
         self.base.update(ev)
         return None
@@ -557,16 +601,16 @@ class _Event:
             held = held_up(trace, f)
             if self.mb.kind == "timeout" and held is not None:
                 share, leader = held
-                return self.other(f"held up behind slower traffic ({leader}) for {share:.0%} of the run",
+                return self.other("held_up", f"held up behind slower traffic ({leader}) for {share:.0%} of the run",
                                   held_share=share, leader=leader)
             # a moving ego, not held up: fog, rain and ice slow a careful driver too, and a time limit too
             # short for the route holds for everyone, which its replay shows
             self.replay_may_settle = self.mb.kind == "timeout"
-            return self.ego(f"the ego did not reach its goal in time ({self.mb.oracle}/{self.mb.kind})")
+            return self.ego("slow", f"the ego did not reach its goal in time ({self.mb.oracle}/{self.mb.kind})")
         blocked = blocked_lanes(trace, self.rmap, f)
         if blocked is None:
             self.replay_may_settle = True  # the rules may have missed a blocker (mid-turn in a junction)
-            return self.ego(f"the ego stood still with nothing blocking its way ({self.mb.oracle}/{self.mb.kind})")
+            return self.ego("no_blocker", f"the ego stood still with nothing blocking its way ({self.mb.oracle}/{self.mb.kind})")
         lanes, free, queue, root = blocked
         leads = self._leads()
         passable = self._room_to_pass(lanes, leads)
@@ -575,20 +619,20 @@ class _Event:
         ev = {"lanes": {l: b for l, b in lanes.items()}, "free_lanes": free}
         own = lanes.get(str(trace["lane"][f]))
         if own is not None and actor_track(trace, own).kind == "pedestrian":
-            return self.other(f"the pedestrian {own} stands in the ego's path", **ev)
+            return self.other("pedestrian_in_lane", f"the pedestrian {own} stands in the ego's path", **ev)
         if not free and lanes:
             what = ", ".join(f"{l} by {b}" for l, b in lanes.items())
-            return self.other(f"every lawful way forward is blocked by stationary bodies: {what}", **ev)
+            return self.other("blocked", f"every lawful way forward is blocked by stationary bodies: {what}", **ev)
         if queue is not None and (leads is None or str(trace["lane"][f]) in leads):  # a queue on the way on
-            return self.other(f"the ego waits in a queue that will move: {queue}", queue=queue, **ev)
+            return self.other("queue", f"the ego waits in a queue that will move: {queue}", queue=queue, **ev)
         behind = own or next(iter(lanes.values()), None)  # mid-lane-change: the blocker of the lane it wants
         if behind is not None:
             if root is not None and own is not None:  # a queue that will not move: the blocker is its head
                 how = "parked" if never_moved(actor_track(trace, root), f) else "stalled"
                 ev["blocker"] = root
-                return self.ego(f"the ego stayed behind the stationary {behind} in a queue that the {how} {root} "
+                return self.ego("stayed_behind", f"the ego stayed behind the stationary {behind} in a queue that the {how} {root} "
                                 f"holds up, although {', '.join(free)} was free", decided=True, **ev)
-            return self.ego(f"the ego stayed behind the stationary {behind} although {', '.join(free)} was free",
+            return self.ego("stayed_behind", f"the ego stayed behind the stationary {behind} although {', '.join(free)} was free",
                             decided=True, **ev)
-        return self.ego(f"the ego stood still although {', '.join(free)} was free", decided=True, **ev)
+        return self.ego("stood_still", f"the ego stood still although {', '.join(free)} was free", decided=True, **ev)
 

@@ -583,6 +583,7 @@ def render_html(info: CampaignInfo, findings: list[FindingRow], incidents: list[
         *(f'<p class="note">{_e(n)}</p>' for n in notes),
         f'<h2>The campaign</h2><dl class="facts">{facts}</dl>',
         "<h2>Risk over the campaign</h2>" + (_img(risk_png, "image/png", "risk per execution") or "<p>-</p>"),
+        *(["<h2>Likely bugs</h2>" + _groups_html(findings)] if len(findings) > 1 else []),
         "<h2>Findings (the ego's fault)</h2>" + (_table_html(findings) if findings else "<p>None.</p>"),
         *(_card_html(by_folder[r.folder]) for r in findings if r.folder in by_folder),
         "<h2>Incidents (not the ego's fault)</h2>" + (_table_html(incidents) if incidents else "<p>None.</p>"),
@@ -590,6 +591,28 @@ def render_html(info: CampaignInfo, findings: list[FindingRow], incidents: list[
         "</body></html>",
     ]
     return "\n".join(parts)
+
+
+_GROUPS_NOTE = ("Findings that one attribution rule blamed on the ego, with the same oracle and kind, are likely "
+                "one bug of the ADS met in several situations (signatures).")
+
+
+def _groups_html(rows: list[FindingRow]) -> str:
+    from drivefuzz.triage.table import bug_groups
+
+    body = "".join(f"<tr><td>{len(g.rows)}</td><td>{g.hits}</td><td>{_e(g.title)}</td>"
+                   f"<td>{_e(' '.join(f'#{r.number}' for r in g.rows))}</td></tr>" for g in bug_groups(rows))
+    return (f"<p>{_e(_GROUPS_NOTE)}</p><table><thead><tr><th>signatures</th><th>hits</th><th>likely bug</th>"
+            f"<th>findings</th></tr></thead><tbody>{body}</tbody></table>")
+
+
+def _groups_md(rows: list[FindingRow]) -> list[str]:
+    from drivefuzz.triage.table import bug_groups
+
+    out = ["## Likely bugs", "", _GROUPS_NOTE, "", "| signatures | hits | likely bug | findings |", "|---:|---:|---|---|"]
+    out += [f"| {len(g.rows)} | {g.hits} | {_md_cell(g.title)} | {' '.join(f'#{r.number}' for r in g.rows)} |"
+            for g in bug_groups(rows)]
+    return out + [""]
 
 
 def _md_cell(x: Any) -> str:
@@ -612,6 +635,8 @@ def render_markdown(info: CampaignInfo, findings: list[FindingRow], incidents: l
              f"{len(findings)} finding(s) and {len(incidents)} incident(s), one per signature. "
              "The pictures are in report.html.", "", *(f"> {n}" for n in notes), "", "## The campaign", ""]
     lines += [f"- **{k}**: {_md_cell(v)}" for k, v in campaign_facts(info)] + [""]
+    if len(findings) > 1:
+        lines += _groups_md(findings)
     for title, rows in (("Findings (the ego's fault)", findings), ("Incidents (not the ego's fault)", incidents)):
         lines += [f"## {title}", "", *_table_md(rows)]
         for r in rows:

@@ -51,6 +51,7 @@ class FindingRow:
     incident: bool = False
     minimal: str | None = None  # the shrunk reproducer: what it kept, and the command that replays it
     crash_type: str | None = None  # a collision with a vehicle: AV-Fuzzer's crash type (triage/crashtype.py)
+    rule: str = ""  # the attribution rule that gave the verdict (triage.attribute.RULES; "" in older campaigns)
 
     @property
     def minimal_replay(self) -> str | None:
@@ -253,6 +254,7 @@ def _row(n: int, rel: str, path: Path, v: dict[str, Any], first, indexed_hits, i
         incident=incident, minimal=_minimal(path, v, ads.get("name") if isinstance(ads.get("name"), str) else None,
                                             replay_command),
         crash_type=v["crash_type"] if isinstance(v.get("crash_type"), str) else None,
+        rule=att["rule"] if isinstance(att.get("rule"), str) else "",
     )
 
 
@@ -265,6 +267,48 @@ def _minimal(path: Path, v: dict[str, Any], ads_name: str | None, replay_command
     a = shrink.get("after") if isinstance(shrink.get("after"), dict) else {}
     sizes = ", ".join(f"{k} {b.get(k)} -> {a.get(k)}" for k in ("actors", "puddles", "knobs", "sim_seconds"))
     return f"{sizes}: {replay_command(path / 'minimal', ads_name)}"
+
+
+@dataclass(frozen=True)
+class BugGroup:
+    """Findings that one attribution rule gave the same verdict on (same oracle, kind and fault): likely one
+    bug, seen in as many situations (signatures) as it has rows."""
+
+    title: str  # "<oracle>/<kind>: <what the rule says happened>"
+    rows: tuple[FindingRow, ...]
+
+    @property
+    def hits(self) -> int:
+        return sum(r.hits for r in self.rows)
+
+    def line(self) -> str:
+        n = len(self.rows)
+        numbers = " ".join(f"#{r.number}" for r in self.rows)
+        return (f"{n:>3} signature{'s' if n != 1 else ' '} {self.hits:>5} hit{'s' if self.hits != 1 else ' '}  "
+                f"{self.title}  ({numbers})")
+
+
+def bug_groups(rows) -> list[BugGroup]:
+    """The rows (:class:`FindingRow`, or anything with its ``number``, ``hits``, ``verdict``, ``fault`` and
+    ``rule``) grouped by :func:`~drivefuzz.triage.attribute.bug_class`: the largest group first, groups of one
+    size in the order of their first row, and each row in its place within its group."""
+    from drivefuzz.triage.attribute import bug_class
+
+    groups: dict[str, tuple[str, list[FindingRow]]] = {}
+    for r in rows:
+        key, title = bug_class(r.verdict, r.fault, r.rule)
+        groups.setdefault(key, (title, []))[1].append(r)
+    out = [BugGroup(title, tuple(members)) for title, members in groups.values()]
+    return sorted(out, key=lambda g: -len(g.rows))
+
+
+def format_groups(rows) -> str:
+    """The likely bugs behind ``rows`` (the ``findings`` command prints them under the table)."""
+    groups = bug_groups(rows)
+    if not groups:
+        return ""
+    return "\n".join([f"likely bugs: {len(groups)} (findings that one attribution rule blamed on the ego, "
+                      f"by oracle and kind)"] + [f"  {g.line()}" for g in groups])
 
 
 def format_table(rows: list[FindingRow], title: str) -> str:
