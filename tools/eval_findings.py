@@ -9,6 +9,7 @@ reference ADS (``FuzzConfig(max_execs=N, strategy=S, seed=SEED)``, everything el
   incidents (folders under ``incidents/``: fault ``other``);
 - per verdict (ego / other / unclear): the number of folders and of hits (executions filed there);
 - signatures against findings: executions with a misbehaviour per distinct signature (the dedup factor);
+- likely bugs: the findings grouped by the attribution rule that blamed the ego (same oracle and kind);
 - reproduction rates: the distribution of ``reproduced k/N`` over the new signatures, robust vs knife-edge;
 - the triage cost: ``triage_executions`` of each folder's ``verdict.json`` (the counterfactual replay
   and the reproduction reruns of a new signature), and the same in executions' worth of wall time;
@@ -121,11 +122,14 @@ def _folders(out: Path, sub: str) -> list[dict[str, Any]]:
         hits_path = p.parent / "hits.json"
         hits = json.loads(hits_path.read_text()).get("count", 1) if hits_path.exists() else 1
         att = v.get("attribution") or {}
+        first = (v.get("misbehaviors") or [{}])[0]
         rows.append({"folder": f"{sub}/{p.parent.name}", "verdict": v, "hits": hits,
                      "fault": att.get("fault") or (v.get("signature") or {}).get("fault") or "ego",
-                     "reason": att.get("reason") or "(no trace: " + str((v.get("misbehaviors") or [{}])[0].get("kind")) + ")",
+                     "reason": att.get("reason") or f"(no trace: {first.get('kind')})",
                      "label": (v.get("signature") or {}).get("label") or "",
-                     "reproduction": v.get("reproduction"), "triage": v.get("triage_executions", 0) or 0})
+                     "reproduction": v.get("reproduction"), "triage": v.get("triage_executions", 0) or 0,
+                     "rule": att.get("rule") or "",
+                     "oracle_kind": f"{first.get('oracle')}/{first.get('kind')}" if first.get("oracle") else "-"})
     return rows
 
 
@@ -153,6 +157,11 @@ def report(out: Path, strategy: str, wall_s: float | None) -> None:
     sigs = len(folders)
     print(f"signatures against findings: {fired} executions with a misbehaviour, {hits} filed, in {sigs} distinct "
           f"signature(s): dedup factor {fired / max(sigs, 1):.1f}")
+    from drivefuzz.triage.attribute import bug_class
+
+    classes = Counter(bug_class(r["oracle_kind"], r["fault"], r["rule"])[1] for r in findings)
+    print(f"likely bugs (findings grouped by the attribution rule that blamed the ego): {len(classes)} for "
+          f"{len(findings)} finding(s)" + "".join(f"\n  {n} x {title}" for title, n in classes.most_common()))
     _print_reproduction(folders)
     _print_triage_cost(out, folders)
     for title, rows in (("findings", findings), ("incidents", incidents)):
