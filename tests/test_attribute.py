@@ -452,6 +452,9 @@ def test_creeping_into_a_body_that_stands_still_is_ego():
     assert (m.oracle, m.actors) == ("collision", ("v2",))
     assert v.evidence["ego_speed"] < 0.1 and v.evidence["other_speed"] == 0.0
     assert v.fault is Fault.EGO and "struck the stationary vehicle v2 with its front" in v.reason, v.reason
+    # the speed it struck at is the faster of the contact's frame and the one before (braking within the step)
+    impact = max(float(ex.trace["speed"][m.frame - 1]), float(ex.trace["speed"][m.frame]))
+    assert v.evidence["impact_speed"] == impact and v.reason.endswith(f"at {impact:.1f} m/s") and v.rule == "struck"
 
 
 def test_driving_into_a_parked_car_is_ego():

@@ -369,7 +369,11 @@ class _Event:
                             ego_from=mine.getFromLane().getID())
         still = float(np.nanmax(oth.speed[frames_before(trace, f, 2.0)])) <= STATIONARY_SPEED
         what = f"stationary {oth.kind}" if still else oth.kind
-        return self.ego("struck", f"the ego struck the {what} {oth.id} with its {side} at {self.v:.1f} m/s")
+        # the speed it struck at: that of the frame before, when the ego braked within the step of the contact
+        # (a car that pulled off at 0.4 m/s into a parked one and braked fully reads 0.0 m/s at the contact)
+        impact = max(self.v, float(trace["speed"][f - 1])) if f > 0 else self.v
+        return self.ego("struck", f"the ego struck the {what} {oth.id} with its {side} at {impact:.1f} m/s",
+                        impact_speed=impact)
 
     def rule_stationary(self, oth: Track, point, side: str, red) -> Attribution | None:
         trace, f = self.trace, self.f
