@@ -358,15 +358,16 @@ def test_following_a_slow_car_round_the_ring_is_being_held_up(tmp_path):
 
 def test_a_car_that_cuts_in_and_brakes_hard_is_at_fault(tmp_path):
     """A campaign's finding, kept as data (tests/data/cut_in_then_brakes): v3 changes from D0D1_1 into the
-    ego's lane D0D1_2 less than a metre ahead of it and brakes hard for the cars that stand in that lane, on a
-    puddle of friction 0.31. The careful driver's replay was struck by a jaywalker first, so the verdict
+    ego's lane D0D1_2, 2 m ahead of it when it begins to move over, and brakes hard for the cars that stand in
+    that lane, on a puddle of friction 0.31. The careful driver's replay was struck by a jaywalker first, so the verdict
     was 'unclear' and the case was reported as a finding."""
     sc, ex = kept_case(tmp_path, "cut_in_then_brakes")
     m = ex.misbehaviors[0]
     assert (m.oracle, m.kind, m.actors) == ("collision", "vehicle", ("v3",))
     v = attribute(sc, ex.trace, m, load_roadmap(NET))
     assert v.fault is Fault.OTHER, v.reason
-    assert v.reason.startswith("the vehicle v3 cut into the ego's lane 0.8 m ahead") and v.rule == "cut_in"
+    assert v.reason.startswith("the vehicle v3 cut into the ego's lane from 2.1 m ahead (moving over from 6.0 s)")
+    assert v.rule == "cut_in"
     assert v.evidence["careful_gap"] <= 0.0 and v.evidence["mu"] == pytest.approx(0.31)
     assert "3.0 m/s^2" in v.reason  # a careful driver brakes no harder than the puddle lets it
 
@@ -394,6 +395,35 @@ def test_a_cut_in_that_leaves_a_careful_driver_room_is_the_egos(pos, speed, brak
     assert (m.actors, v.fault) == (("v0",), Fault.EGO), v.reason
     assert v.evidence["careful_gap"] > 0.0 and v.evidence["entered_frame"] < m.frame
     assert v.reason.endswith("a careful driver avoided it")
+
+
+def test_a_standstill_mid_turn_behind_a_car_on_the_way_out_is_blocked(tmp_path):
+    """A campaign's incident, kept as data (tests/data/stuck_mid_turn_behind_a_queue): the ego turns right
+    at B1 behind v0, which stops in the junction's exit behind the parked v1; the ego stands in the
+    junction (:B1_1_0) for 60 s. Mid-turn, v0 stood 6 m on along the ego's way but 4 m to the right of its
+    heading, so 'nothing blocked its way' and only the careful driver's replay excused it."""
+    sc, ex = kept_case(tmp_path, "stuck_mid_turn_behind_a_queue")
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.kind, m.details["lane"]) == ("immobility", "immobile", ":B1_1_0")
+    v = attribute(sc, ex.trace, m, load_roadmap(NET))
+    assert v.fault is Fault.OTHER and v.rule == "blocked", v.reason
+    assert v.evidence["lanes"] == {":B1_1_0": "v0"}
+    assert signature(sc, ex.trace, m, load_roadmap(NET), v).other_kind == "vehicle"
+
+
+def test_a_slow_car_nosing_into_the_lane_ahead_is_the_egos_to_avoid(tmp_path):
+    """A campaign's finding, kept as data (tests/data/car_noses_into_the_lane): v5 crawls (below 1 m/s) and
+    turns from WB0_1 into the ego's lane WB0_0 while the ego speeds up from 10 to 13 m/s towards it, brakes
+    late, and strikes it. Its body entered the lane 17 m ahead of the ego, too close for a careful driver
+    braking from then; but it had been nosing over for 0.8 s before, which a careful driver sees: the cut-in
+    rule does not excuse the ego, and the careful driver's replay avoids the crash."""
+    net = Path(NET).with_name("interchange.net.xml")
+    sc, ex = kept_case(tmp_path, "car_noses_into_the_lane", str(net))
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.actors) == ("collision", ("v5",))
+    v = attribute(sc, ex.trace, m, load_roadmap(net))
+    assert v.fault is Fault.EGO and v.rule == "struck", v.reason
+    assert v.evidence["careful_gap"] > 0.0 and ex.trace["t"][v.evidence["entered_frame"]] < 6.5
 
 
 def test_changing_lanes_into_a_car_alongside_is_ego():

@@ -16,8 +16,8 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
      harder than :data:`COMFORT_DECEL` without a hazard ahead;
   3. *cut-in*: a vehicle moved into the ego's lane ahead of it (its body wholly outside the lane, then in it,
      within :data:`CUT_IN_WINDOW` seconds) or alongside it, and a careful driver reacting
-     (``CAREFUL_REACTION``) and braking (``CAREFUL_DECEL``, less on low friction) from that moment would
-     still have reached where it went: the yardstick by which the mutator places cut-ins;
+     (``CAREFUL_REACTION``) and braking (``CAREFUL_DECEL``, less on low friction) from when it began to
+     move over would still have reached where it went: the yardstick by which the mutator places cut-ins;
   4. *right of way*: the other vehicle entered the junction on red, or from a link that must
      yield to the ego's (SUMO's junction logic: the response bits of the two connections),
      while the ego entered lawfully;
@@ -459,7 +459,7 @@ class _Event:
             self.base.update(ev)
             return None
         how = (f"moved into the ego's lane alongside it" if gap0 < 0.0 else
-               f"cut into the ego's lane {gap0:.1f} m ahead at {float(trace['t'][k]):.1f} s")
+               f"cut into the ego's lane from {gap0:.1f} m ahead (moving over from {float(trace['t'][k]):.1f} s)")
         return self.other("cut_in", f"the vehicle {oth.id} {how}; braking {CAREFUL_REACTION:.2f} s later at {decel:.1f} "
                           f"m/s^2, a careful driver could not have kept clear of it", **ev)
 

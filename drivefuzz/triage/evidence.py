@@ -168,8 +168,8 @@ def sideways_into(trace, rmap, oth: Track, f: int, side: str, seconds: float = 1
 
 @dataclass(frozen=True)
 class CutIn:
-    """A vehicle that moved into the ego's lane ahead of it: from frame ``entered`` (the first of the last run
-    of frames in which its body overlapped the lane) to the event, both bodies' centres along the lane [m]."""
+    """A vehicle that moved into the ego's lane ahead of it: from frame ``entered`` (when it began to move
+    towards the lane, on the way to overlapping it) to the event, both bodies' centres along the lane [m]."""
 
     entered: int
     ego_s: np.ndarray  # [m] along the lane, frames entered..f
@@ -177,11 +177,17 @@ class CutIn:
     overlap: float  # [m] how far its body reached into the lane at the event
 
 
+#: [m/s] sideways speed towards the ego's lane from which a vehicle shows that it is coming in.
+CUT_IN_LATERAL_SPEED = 0.2
+
+
 def cut_in(trace, rmap, oth: Track, f: int, seconds: float = 4.0) -> CutIn | None:
     """How ``oth`` came into the ego's lane within ``seconds`` before ``f``, measured on the normal lane the
     ego was on at ``f`` (and stayed on since the window began, or since it entered that lane): None unless its
     body was wholly outside the lane at some frame and overlapped it from a later frame up to ``f``, with its
-    centre ahead of the ego's then."""
+    centre ahead of the ego's then. It counts as coming in from the first frame of the run of frames, up to
+    the overlap, in which it moved towards the lane at :data:`CUT_IN_LATERAL_SPEED` or more: a careful
+    driver sees a car nose towards its lane before the car is in it."""
     lane = str(trace["lane"][f])
     if not lane or lane.startswith(":") or not rmap.has_lane(lane):
         return None
@@ -194,20 +200,23 @@ def cut_in(trace, rmap, oth: Track, f: int, seconds: float = 4.0) -> CutIn | Non
         return None
     g = rmap.geom(lane)
     half_lane = 0.5 * g.width
-    inside, ego_s, other_s, overlap = [], [], [], 0.0
+    off, ego_s, other_s, overlap = [], [], [], 0.0
     for k in range(k0, f + 1):
         if not oth.present(k):
             return None
         s_o, lat = g.project(float(oth.x[k]), float(oth.y[k]))
         s_e, _ = g.project(float(trace["x"][k]), float(trace["y"][k]))
+        off.append(abs(lat))
         overlap = half_lane + 0.5 * oth.width - abs(lat)  # [m] of its body across the lane's edge
-        inside.append(overlap > 0.0)
         ego_s.append(s_e)
         other_s.append(s_o)
+    inside = [half_lane + 0.5 * oth.width - o > 0.0 for o in off]
     if all(inside) or not inside[-1]:
         return None
-    last_out = max(i for i, v in enumerate(inside) if not v)
-    i_in = last_out + 1
+    i_in = max(i for i, v in enumerate(inside) if not v) + 1
+    step = CUT_IN_LATERAL_SPEED * trace.step_length
+    while i_in > 0 and off[i_in - 1] - off[i_in] >= step:
+        i_in -= 1
     if other_s[i_in] <= ego_s[i_in]:
         return None
     return CutIn(k0 + i_in, np.asarray(ego_s[i_in:]), np.asarray(other_s[i_in:]), overlap)
@@ -446,7 +455,7 @@ def blocked_lanes(trace, rmap, f: int, reach: float = 60.0):
     lane = str(trace["lane"][f])
     dt = trace.step_length
     if lane.startswith(":"):  # in a junction there is one way forward: the body right ahead
-        ahead = _still_ahead(trace, f, dt)
+        ahead = _still_ahead(trace, f, dt) or _still_on_path(trace, rmap, lane, f, dt)
         return ({lane: ahead}, [], None, None) if ahead else None
     if not lane or not rmap.has_lane(lane):
         return None
@@ -494,6 +503,40 @@ def _still_ahead(trace, f: int, dt: float, reach: float = 15.0) -> str | None:
             t = actor_track(trace, a.ids[j])
             if _still(t, f, dt) and (best is None or lx < best[0]):
                 best = (lx, a.ids[j])
+    return best[1] if best else None
+
+
+def _still_on_path(trace, rmap, lane: str, f: int, dt: float, reach: float = 15.0) -> str | None:
+    """A stationary body on the ego's way through a junction: within ``reach`` m past its front along the
+    internal lane it stands on and the lanes that one leads to, and within both bodies' half widths of
+    their centre lines. Mid-turn, what blocks the ego stands to the side of its heading (a car 6 m on
+    along a right turn stood 4 m to the right of it), where :func:`_still_ahead` does not look."""
+    if not rmap.has_lane(lane):
+        return None
+    x, y = float(trace["x"][f]), float(trace["y"][f])
+    g = rmap.geom(lane)
+    s0, _ = g.project(x, y)
+    path, arc, lane_id, s = [], 0.0, lane, s0  # (geometry, from, to, path length before it)
+    limit = EGO_LENGTH / 2 + reach
+    while lane_id and arc < limit and len(path) < 8:
+        g = rmap.geom(lane_id)
+        path.append((g, s, g.length, arc))
+        arc += max(g.length - s, 0.0)
+        nxt = rmap.lane(lane_id).getOutgoing() if lane_id.startswith(":") else []
+        lane_id, s = (nxt[0].getToLane().getID(), 0.0) if nxt else (None, 0.0)
+    a = trace.actors
+    r = a.rows(f)
+    best = None
+    for j, bx, by in zip(a.actor[r], a.x[r], a.y[r]):
+        j = int(j)
+        half = EGO_WIDTH / 2 + float(a.width[j]) / 2
+        for g, s_from, s_to, before in path:
+            s_b, lat = g.project(float(bx), float(by))
+            along = before + s_b - s_from
+            if s_from <= s_b <= s_to and abs(lat) < half and EGO_LENGTH / 2 < along <= limit + float(a.length[j]) / 2:
+                if _still(actor_track(trace, a.ids[j]), f, dt) and (best is None or along < best[0]):
+                    best = (along, a.ids[j])
+                break
     return best[1] if best else None
 
 
