@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -426,6 +427,33 @@ def test_a_slow_car_nosing_into_the_lane_ahead_is_the_egos_to_avoid(tmp_path):
     assert v.evidence["careful_gap"] > 0.0 and ex.trace["t"][v.evidence["entered_frame"]] < 6.5
 
 
+@pytest.mark.parametrize("heading, start_x, counts", [
+    (0.0, 75.0, True),  # the lane's way: a cut-in
+    (math.pi, 75.0, False),  # oncoming, drifting into the lane: a head-on question, not a cut-in
+    (0.0, 196.0, False),  # crossing past the lane's end: projected onto the end, it is beyond the lane
+])
+def test_what_counts_as_a_cut_in(heading, start_x, counts):
+    """Hand-made traces on the highway (lanes along +x, 3.5 m wide): the ego drives 10 m/s in hw0_1
+    (y = -5.25); the other moves from hw0_2 (y = -1.75) into it over 2 s, 15 m ahead."""
+    from drivefuzz.sim.trace import trace_from_arrays
+    from drivefuzz.triage.evidence import actor_track, cut_in
+
+    n = 80
+    t = np.arange(n) * 0.05
+    ex = start_x - 15.0 + 10.0 * t
+    ego = {"x": ex, "y": np.full(n, -5.25), "heading": np.zeros(n), "speed": np.full(n, 10.0),
+           "lane": ["hw0_1"] * n}
+    y = np.interp(t, [0.5, 2.5], [-1.75, -5.25])
+    other = {"id": "v0", "kind": "vehicle", "length": 4.6, "width": 1.9, "x": start_x + 10.0 * t, "y": y,
+             "heading": np.full(n, heading), "speed": np.full(n, 10.0)}
+    trace = trace_from_arrays(ego, {"step_length": 0.05}, [other])
+    rmap = load_roadmap(Path(NET).with_name("highway.net.xml"))
+    got = cut_in(trace, rmap, actor_track(trace, "v0"), n - 1)
+    assert (got is not None) is counts
+    if counts:  # it counts from when it began to move over (0.5 s), not from when its body reached the lane
+        assert 9 <= got.entered <= 11 and got.other_s[0] - got.ego_s[0] == pytest.approx(15.0, abs=0.1)
+
+
 def test_changing_lanes_into_a_car_alongside_is_ego():
     # the reference ADS's real bug: its route needs A0B0_2 (left turn at B0), and it changes lanes into
     # a car driving alongside it there
@@ -774,3 +802,5 @@ def test_every_rule_a_verdict_names_is_described():
     assert bug_class("collision/vehicle", "ego", "failed_to_yield") == (
         "collision/vehicle|ego|failed_to_yield", "collision/vehicle: it did not yield where its link must yield")
     assert bug_class("collision/vehicle", "ego", "") == ("collision/vehicle|ego", "collision/vehicle")
+    with pytest.raises(ValueError, match="not described"):
+        Attribution(Fault.EGO, "x", {}, "a_rule_nobody_described")

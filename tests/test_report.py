@@ -124,9 +124,12 @@ def test_findings_group_by_the_rule_that_blamed_the_ego():
 
     rows = [row(0, "red_light/red", "own_driving"), row(1, "collision/vehicle", "failed_to_yield", hits=3),
             row(2, "collision/vehicle", "struck"), row(3, "collision/vehicle", "failed_to_yield"),
-            row(4, "collision/vehicle", "", hits=2), row(5, "collision/vehicle", "unknown-rule")]
+            row(4, "collision/vehicle", "", hits=2), row(5, "collision/vehicle", "unknown-rule"),
+            row(6, "collision/vehicle", "struck", fault="unclear")]
     groups = bug_groups(rows)
-    assert [[r.number for r in g.rows] for g in groups] == [[1, 3], [4, 5], [0], [2]]
+    assert [[r.number for r in g.rows] for g in groups] == [[1, 3], [4, 5], [0], [2], [6]]
+    # a finding the careful driver's replay could not settle is not the ego's yet: its own group, and said so
+    assert groups[4].title == "collision/vehicle: it struck another road user (fault: unclear)"
     assert groups[0].title == "collision/vehicle: it did not yield where its link must yield" and groups[0].hits == 4
     assert groups[1].title == "collision/vehicle"  # verdicts filed before rules were recorded: oracle and kind
     assert groups[0].line().endswith("(#1 #3)")

@@ -44,6 +44,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--runs", type=int, default=5, help="later executions to time [5]")
     ap.add_argument("--cli-runs", type=int, default=5, help="drivefuzz run and SUMO alone, each [5]")
     args = ap.parse_args(argv)
+    if args.runs < 1 or args.cli_runs < 1 or args.seeds < 1:
+        ap.error("--seeds, --runs and --cli-runs must be at least 1")
     import drivefuzz
     from drivefuzz.oracle import OracleSettings
     from drivefuzz.scenario.seed import list_seeds

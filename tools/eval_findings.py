@@ -159,9 +159,9 @@ def report(out: Path, strategy: str, wall_s: float | None) -> None:
           f"signature(s): dedup factor {fired / max(sigs, 1):.1f}")
     from drivefuzz.triage.attribute import bug_class
 
-    classes = Counter(bug_class(r["oracle_kind"], r["fault"], r["rule"])[1] for r in findings)
+    classes = Counter(bug_class(r["oracle_kind"], r["fault"], r["rule"]) for r in findings)
     print(f"likely bugs (findings grouped by the attribution rule that blamed the ego): {len(classes)} for "
-          f"{len(findings)} finding(s)" + "".join(f"\n  {n} x {title}" for title, n in classes.most_common()))
+          f"{len(findings)} finding(s)" + "".join(f"\n  {n} x {title}" for (_k, title), n in classes.most_common()))
     _print_reproduction(folders)
     _print_triage_cost(out, folders)
     for title, rows in (("findings", findings), ("incidents", incidents)):

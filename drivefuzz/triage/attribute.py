@@ -17,7 +17,7 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   3. *cut-in*: a vehicle moved into the ego's lane ahead of it (its body wholly outside the lane, then in it,
      within :data:`CUT_IN_WINDOW` seconds) or alongside it, and a careful driver reacting
      (``CAREFUL_REACTION``) and braking (``CAREFUL_DECEL``, less on low friction) from when it began to
-     move over would still have reached where it went: the yardstick by which the mutator places cut-ins;
+     move over would still have reached where it went (the careful driver the fairness rules assume);
   4. *right of way*: the other vehicle entered the junction on red, or from a link that must
      yield to the ego's (SUMO's junction logic: the response bits of the two connections),
      while the ego entered lawfully;
@@ -166,9 +166,10 @@ def bug_class(verdict: str, fault: str, rule: str) -> tuple[str, str]:
     """(key, title) of the likely bug behind a finding: its oracle/kind (``verdict``), fault and rule. A verdict
     that names no rule (one filed before verdicts recorded theirs) is a class of its oracle and kind alone."""
     what = RULES.get(rule)
+    tail = "" if fault == Fault.EGO.value else f" (fault: {fault})"  # an unclear finding is not the ego's yet
     if what is None:
-        return f"{verdict}|{fault}", verdict
-    return f"{verdict}|{fault}|{rule}", f"{verdict}: {what}"
+        return f"{verdict}|{fault}", verdict + tail
+    return f"{verdict}|{fault}|{rule}", f"{verdict}: {what}{tail}"
 
 
 @dataclass(frozen=True)
@@ -180,6 +181,10 @@ class Attribution:
     reason: str
     evidence: Mapping[str, Any] = field(default_factory=dict)
     rule: str = ""
+
+    def __post_init__(self):
+        if self.rule and self.rule not in RULES:
+            raise ValueError(f"attribution rule {self.rule!r} is not described in RULES")
 
     def as_dict(self) -> dict[str, Any]:
         return {"fault": self.fault.value, "reason": self.reason, "rule": self.rule,
@@ -229,8 +234,10 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
         cause = None
         if oracle == "lane_invasion":
             cause = unkeepable
+        elif out.fault is Fault.OTHER and oracle == "mission":  # slow all the way: fog, or ice anywhere
+            cause = _short_sight(scenario) or _slippery(trace, f, window_s=float(trace["t"][f]) + 1.0)
         elif out.fault is Fault.OTHER:
-            cause = _short_sight(scenario) if oracle == "mission" else _slippery(trace, f)
+            cause = _slippery(trace, f)
         if cause is not None and out.fault is Fault.OTHER:  # what the careful driver could not master either
             out = Attribution(out.fault, f"{out.reason}: {cause}", {**out.evidence, "cause": cause}, out.rule)
         return out
@@ -447,7 +454,8 @@ class _Event:
         k = entry.entered
         t = trace["t"][k:f + 1] - trace["t"][k]
         v0 = float(trace["speed"][k])
-        mu = float(np.nanmin(np.fmin(trace["mu_front"][k:f + 1], trace["mu_rear"][k:f + 1])))
+        grip = np.fmin(trace["mu_front"][k:f + 1], trace["mu_rear"][k:f + 1])
+        mu = float(np.nanmin(grip)) if np.any(~np.isnan(grip)) else 1.0  # off-road all along: a dry road
         decel = min(CAREFUL_DECEL, max(min(mu, 1.0), 0.05) * G)
         braking = np.clip(t - CAREFUL_REACTION, 0.0, v0 / decel)
         careful_s = entry.ego_s[0] + v0 * np.minimum(t, CAREFUL_REACTION) + v0 * braking - 0.5 * decel * braking ** 2

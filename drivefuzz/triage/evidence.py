@@ -179,39 +179,45 @@ class CutIn:
 
 #: [m/s] sideways speed towards the ego's lane from which a vehicle shows that it is coming in.
 CUT_IN_LATERAL_SPEED = 0.2
+#: [rad] a vehicle that overlaps the ego's lane heading farther from the lane's way than this crosses or
+#: comes the other way: a right-of-way question, not a cut-in.
+CUT_IN_HEADING = math.radians(60.0)
 
 
 def cut_in(trace, rmap, oth: Track, f: int, seconds: float = 4.0) -> CutIn | None:
     """How ``oth`` came into the ego's lane within ``seconds`` before ``f``, measured on the normal lane the
-    ego was on at ``f`` (and stayed on since the window began, or since it entered that lane): None unless its
-    body was wholly outside the lane at some frame and overlapped it from a later frame up to ``f``, with its
-    centre ahead of the ego's then. It counts as coming in from the first frame of the run of frames, up to
-    the overlap, in which it moved towards the lane at :data:`CUT_IN_LATERAL_SPEED` or more: a careful
-    driver sees a car nose towards its lane before the car is in it."""
+    ego was on at ``f`` (and stayed on since the window began, or since it entered that lane), from the first
+    frame ``oth`` was there: None unless its body was wholly outside the lane at some frame and overlapped it
+    from a later frame up to ``f``, travelling the lane's way (within :data:`CUT_IN_HEADING` of it) with its
+    centre ahead of the ego's then. A position beyond either end of the lane (a car crossing past the stop
+    line) is outside it. It counts as coming in from the first frame of the run of frames, up to the overlap,
+    in which it moved towards the lane at :data:`CUT_IN_LATERAL_SPEED` or more: a careful driver sees a car
+    nose towards its lane before the car is in it."""
     lane = str(trace["lane"][f])
-    if not lane or lane.startswith(":") or not rmap.has_lane(lane):
+    if not lane or lane.startswith(":") or not rmap.has_lane(lane) or not oth.present(f):
         return None
     w = frames_before(trace, f, seconds)
     k0 = w.start
     lanes = trace["lane"]
-    while k0 < f and str(lanes[k0]) != lane:  # frames before the ego came onto the lane are measured elsewhere
+    # frames before the ego came onto the lane are measured elsewhere, and before the other appeared not at all
+    while k0 < f and (str(lanes[k0]) != lane or not oth.present(k0)):
         k0 += 1
-    if any(str(lanes[k]) != lane for k in range(k0, f + 1)):
+    if any(str(lanes[k]) != lane or not oth.present(k) for k in range(k0, f + 1)):
         return None
     g = rmap.geom(lane)
     half_lane = 0.5 * g.width
-    off, ego_s, other_s, overlap = [], [], [], 0.0
+    off, ego_s, other_s = [], [], []
     for k in range(k0, f + 1):
-        if not oth.present(k):
-            return None
         s_o, lat = g.project(float(oth.x[k]), float(oth.y[k]))
         s_e, _ = g.project(float(trace["x"][k]), float(trace["y"][k]))
-        off.append(abs(lat))
-        overlap = half_lane + 0.5 * oth.width - abs(lat)  # [m] of its body across the lane's edge
+        off.append(abs(lat) if 0.0 < s_o < g.length else math.inf)  # pinned to an end: beyond the lane
         ego_s.append(s_e)
         other_s.append(s_o)
     inside = [half_lane + 0.5 * oth.width - o > 0.0 for o in off]
     if all(inside) or not inside[-1]:
+        return None
+    lane_heading = g.position(other_s[-1])[2]
+    if abs(wrap_angle(float(oth.heading[f]) - lane_heading)) > CUT_IN_HEADING:  # oncoming or crossing
         return None
     i_in = max(i for i, v in enumerate(inside) if not v) + 1
     step = CUT_IN_LATERAL_SPEED * trace.step_length
@@ -219,7 +225,7 @@ def cut_in(trace, rmap, oth: Track, f: int, seconds: float = 4.0) -> CutIn | Non
         i_in -= 1
     if other_s[i_in] <= ego_s[i_in]:
         return None
-    return CutIn(k0 + i_in, np.asarray(ego_s[i_in:]), np.asarray(other_s[i_in:]), overlap)
+    return CutIn(k0 + i_in, np.asarray(ego_s[i_in:]), np.asarray(other_s[i_in:]), half_lane + 0.5 * oth.width - off[-1])
 
 
 def sensor_range(weather) -> float:
@@ -613,6 +619,10 @@ def _queue(trace, rmap, lead: Track, f: int, track, dt: float) -> tuple[str | No
     return None, (None if head is lead else head.id)
 
 
+#: [1/m] the tightest bend held_up() follows (a radius of 15 m; the yaw rate of a slow car is noisy).
+MAX_CURVATURE = 1.0 / 15.0
+
+
 def held_up(trace, f: int, gap: float = 30.0) -> tuple[float, str] | None:
     """(share of frames, leader) when a slower vehicle was close ahead in the ego's lane for most of
     the run (at least half of the frames); None otherwise. In a bend, "ahead in its lane" is along the
@@ -626,9 +636,13 @@ def held_up(trace, f: int, gap: float = 30.0) -> tuple[float, str] | None:
         lim = trace["speed_limit"][k]
         speed = float(trace["speed"][k])
         curvature = float(trace["yaw_rate"][k]) / speed if speed > 1.0 else 0.0
+        radius = 1.0 / min(abs(curvature), MAX_CURVATURE) if curvature else math.inf
         for j, x, y, v in zip(a.actor[r], a.x[r], a.y[r], a.speed[r]):
             lx, ly = to_local(trace, k, float(x), float(y))
-            if 0 < lx < gap and abs(ly - 0.5 * curvature * lx * lx) < 1.5 and (math.isnan(lim) or v < 0.8 * lim):
+            if not 0 < lx < min(gap, radius):  # ahead, and on the near quarter of the circle it turns on
+                continue
+            arc = math.copysign(radius - math.sqrt(radius * radius - lx * lx), curvature) if curvature else 0.0
+            if abs(ly - arc) < 1.5 and (math.isnan(lim) or v < 0.8 * lim):
                 count += 1
                 leaders[a.ids[int(j)]] = leaders.get(a.ids[int(j)], 0) + 1
                 break

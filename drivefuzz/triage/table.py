@@ -307,7 +307,7 @@ def format_groups(rows) -> str:
     groups = bug_groups(rows)
     if not groups:
         return ""
-    return "\n".join([f"likely bugs: {len(groups)} (findings that one attribution rule blamed on the ego, "
+    return "\n".join([f"likely bugs: {len(groups)} (findings that one attribution rule gave the same verdict, "
                       f"by oracle and kind)"] + [f"  {g.line()}" for g in groups])
 
 
