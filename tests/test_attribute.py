@@ -454,6 +454,21 @@ def test_what_counts_as_a_cut_in(heading, start_x, counts):
         assert 9 <= got.entered <= 11 and got.other_s[0] - got.ego_s[0] == pytest.approx(15.0, abs=0.1)
 
 
+def test_a_walker_who_walks_into_the_car_that_stopped_for_him_is_at_fault(tmp_path):
+    """A campaign's finding, kept as data (tests/data/walker_into_a_stopped_car): the ego brakes from 7.9 m/s
+    for p3 and stands still 0.35 s before p3 walks into its front right corner. The stationary rule asked for
+    0.5 s at rest, the walker rule measured no gap to stop in (the ego already stood), and the careful
+    driver's replay, which stopped farther back, 'avoided it': filed as the ego's fault."""
+    net = Path(NET).with_name("intersection.net.xml")
+    sc, ex = kept_case(tmp_path, "walker_into_a_stopped_car", str(net))
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.kind, m.actors) == ("collision", "pedestrian", ("p3",))
+    speed = ex.trace["speed"]
+    assert max(speed[m.frame - 7:m.frame + 1]) <= 0.1 < max(speed[m.frame - 10:m.frame + 1])  # at rest 0.35 s
+    v = attribute(sc, ex.trace, m, load_roadmap(net))
+    assert v.fault is Fault.OTHER and v.rule == "stationary_struck", v.reason
+
+
 def test_changing_lanes_into_a_car_alongside_is_ego():
     # the reference ADS's real bug: its route needs A0B0_2 (left turn at B0), and it changes lanes into
     # a car driving alongside it there

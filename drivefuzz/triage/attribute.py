@@ -9,8 +9,8 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
 
   0. (``ego``, decided) the ego entered the junction on red; its link had to yield to the other's;
      it changed lanes into a vehicle alongside (moved sideways towards it more than it came);
-  1. *stationary*: the ego stood still when it was struck (and stood where it may: it had not
-     just crossed a stop line on red);
+  1. *stationary*: the ego stood still when it was struck, since :data:`STOPPED_BEFORE` seconds at least
+     (and stood where it may: it had not just crossed a stop line on red);
   2. *rear*: the ego was struck in its rear half while lawfully in its lane (no lane change in
      the last :data:`LANE_CHANGE_WINDOW` seconds, no red light crossed) and it had not braked
      harder than :data:`COMFORT_DECEL` without a hazard ahead;
@@ -96,6 +96,9 @@ from drivefuzz.triage.evidence import (
 
 #: [s] before a contact, over which the rules that excuse a struck ego look for the other body's approach.
 APPROACH_WINDOW = 2.0
+#: [s] an ego at rest this long before a contact was struck: it had stopped (for a walker it braked for, say)
+#: before the other reached it, and it cannot have moved into it since.
+STOPPED_BEFORE = 0.25
 #: [s] before a contact, over which a vehicle that moved into the ego's lane counts as cutting in.
 CUT_IN_WINDOW = 4.0
 
@@ -384,7 +387,7 @@ class _Event:
 
     def rule_stationary(self, oth: Track, point, side: str, red) -> Attribution | None:
         trace, f = self.trace, self.f
-        w = frames_before(trace, f, 0.5)
+        w = frames_before(trace, f, STOPPED_BEFORE)
         if float(np.max(trace["speed"][w])) > STATIONARY_SPEED or red is not None or not trace["lane"][f]:
             return None
         # an ego creeping below the stationary speed into a body that stood still (a waiting car's throttle-brake
