@@ -737,10 +737,29 @@ def replay(finding, gui, speed, ads_name):
     got = ex.misbehaviors[0] if ex.misbehaviors else None
     if got is not None and got.oracle == want.oracle and got.kind == want.kind and got.frame == want.frame:
         click.echo(f"reproduced: {got.oracle}/{got.kind} at frame {got.frame} (t={got.time:.2f} s)")
+        _echo_stored_verdict(verdict)
         sys.exit(EXIT_CLEAN)
     seen = f"{got.oracle}/{got.kind} at frame {got.frame}" if got else f"no misbehaviour ({ex.termination.value})"
     click.echo(f"NOT reproduced: expected {want.oracle}/{want.kind} at frame {want.frame}, got {seen}")
     sys.exit(EXIT_FOUND)
+
+
+def _echo_stored_verdict(verdict: dict) -> None:
+    """The finding's stored attribution, as triage filed it: fault, the likely bug, and the reason (text
+    from a folder that may come from anyone: printed without its control characters)."""
+    from drivefuzz.triage.attribute import bug_class
+
+    att = verdict.get("attribution")
+    if not isinstance(att, dict) or not isinstance(att.get("reason"), str):
+        return
+    m = verdict["misbehaviors"][0]
+
+    def clean(x) -> str:
+        return "".join(c for c in str(x) if c.isprintable())
+
+    _key, title = bug_class(f"{m['oracle']}/{m['kind']}", clean(att.get("fault", "?")), clean(att.get("rule", "")))
+    click.echo(f"  fault {clean(att.get('fault', '?'))}: {clean(att['reason'])}")
+    click.echo(f"  likely bug: {title}")
 
 
 def _load_finding(finding: str, ads_name: str | None):

@@ -44,6 +44,8 @@ def test_injected_fault_is_found_and_replays(tmp_path, fault, oracle):
     assert matching, [f"{f.misbehavior.oracle}/{f.misbehavior.kind}" for f in findings]
     out = _replays(matching[0].path)
     assert f"reproduced: {oracle}/" in out
+    # and what triage filed: the fault, its reason and the likely bug
+    assert "  fault ego: the ego's own driving: " in out and f"  likely bug: {oracle}/" in out
 
 
 class _Reckless:
