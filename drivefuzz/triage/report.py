@@ -600,8 +600,9 @@ _GROUPS_NOTE = ("Findings that one attribution rule blamed on the ego, with the 
 def _groups_html(rows: list[FindingRow]) -> str:
     from drivefuzz.triage.table import bug_groups
 
-    body = "".join(f"<tr><td>{len(g.rows)}</td><td>{g.hits}</td><td>{_e(g.title)}</td>"
-                   f"<td>{_e(' '.join(f'#{r.number}' for r in g.rows))}</td></tr>" for g in bug_groups(rows))
+    body = "".join(f'<tr><td class="n">{len(g.rows)}</td><td class="n">{g.hits}</td><td>{_e(g.title)}</td><td>'
+                   + " ".join(f'<a href="#{_e(r.folder)}">#{r.number}</a>' for r in g.rows) + "</td></tr>"
+                   for g in bug_groups(rows))
     return (f"<p>{_e(_GROUPS_NOTE)}</p><table><thead><tr><th>signatures</th><th>hits</th><th>likely bug</th>"
             f"<th>findings</th></tr></thead><tbody>{body}</tbody></table>")
 
