@@ -757,7 +757,8 @@ def _echo_stored_verdict(verdict: dict) -> None:
     def clean(x) -> str:
         return "".join(c for c in str(x) if c.isprintable())
 
-    _key, title = bug_class(f"{m['oracle']}/{m['kind']}", clean(att.get("fault", "?")), clean(att.get("rule", "")))
+    _key, title = bug_class(clean(f"{m['oracle']}/{m['kind']}"), clean(att.get("fault", "?")),
+                            clean(att.get("rule", "")))
     click.echo(f"  fault {clean(att.get('fault', '?'))}: {clean(att['reason'])}")
     click.echo(f"  likely bug: {title}")
 
