@@ -221,11 +221,12 @@ def cut_in(trace, rmap, oth: Track, f: int, seconds: float = 4.0) -> CutIn | Non
         return None
     i_in = max(i for i, v in enumerate(inside) if not v) + 1
     step = CUT_IN_LATERAL_SPEED * trace.step_length
-    while i_in > 0 and off[i_in - 1] - off[i_in] >= step:
+    while i_in > 0 and math.isfinite(off[i_in - 1]) and off[i_in - 1] - off[i_in] >= step:  # never onto an end
         i_in -= 1
     if other_s[i_in] <= ego_s[i_in]:
         return None
-    return CutIn(k0 + i_in, np.asarray(ego_s[i_in:]), np.asarray(other_s[i_in:]), half_lane + 0.5 * oth.width - off[-1])
+    overlap = half_lane + 0.5 * oth.width - off[-1]
+    return CutIn(k0 + i_in, np.asarray(ego_s[i_in:]), np.asarray(other_s[i_in:]), overlap)
 
 
 def sensor_range(weather) -> float:
