@@ -191,7 +191,7 @@ class NetIndex:
             got = netcache.load(key)
             try:
                 ids, b = got["ids"], got["boxes"]
-                if ids.dtype.kind != "U" or b.dtype != np.float64 or b.shape != (len(ids), 4):
+                if ids.dtype.kind != "U" or ids.ndim != 1 or b.dtype != np.float64 or b.shape != (len(ids), 4):
                     raise ValueError("not a lane-box entry")
             except (TypeError, KeyError, ValueError):
                 ids, b = self._lane_boxes()

@@ -131,7 +131,8 @@ def test_lane_boxes_come_from_the_cache_and_a_malformed_entry_is_rebuilt(tmp_pat
     assert stored["ids"].tolist() == first._lane_boxes()[0].tolist()
     assert [(l.id, i) for l, i in NetIndex(rmap).cell(*cell)] == want  # from the entry
     for ids, boxes in ((stored["ids"], stored["boxes"][:, :3]),  # a wrong shape
-                       (np.arange(len(stored["ids"])), stored["boxes"])):  # ids that are not strings
+                       (np.arange(len(stored["ids"])), stored["boxes"]),  # ids that are not strings
+                       (np.stack([stored["ids"], stored["ids"]], axis=1), stored["boxes"])):  # ids in two columns
         netcache.store(key, {"ids": ids, "boxes": boxes})
         assert [(l.id, i) for l, i in NetIndex(rmap).cell(*cell)] == want
         assert netcache.load(key)["boxes"].shape == stored["boxes"].shape  # rewritten whole
