@@ -234,15 +234,15 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
     settles = oracle not in NO_COUNTERFACTUAL or ev.replay_may_settle or unkeepable is not None
     if verdict.fault is not Fault.OTHER and not ev.decided and replay is not None and settles:
         out = counterfactual(scenario, misbehavior, replay, verdict)
-        cause = None
-        if oracle == "lane_invasion":
-            cause = unkeepable
-        elif out.fault is Fault.OTHER and oracle == "mission":  # slow all the way: fog, or ice anywhere
-            cause = _short_sight(scenario) or _slippery(trace, f, window_s=float(trace["t"][f]) + 1.0)
-        elif out.fault is Fault.OTHER:
-            cause = _slippery(trace, f)
-        if cause is not None and out.fault is Fault.OTHER:  # what the careful driver could not master either
-            out = Attribution(out.fault, f"{out.reason}: {cause}", {**out.evidence, "cause": cause}, out.rule)
+        if out.fault is Fault.OTHER:  # name what the careful driver could not master either
+            if oracle == "lane_invasion":
+                cause = unkeepable
+            elif oracle == "mission":  # slow all the way: fog, or ice anywhere
+                cause = _short_sight(scenario) or _slippery(trace, f, window_s=float(trace["t"][f]) + 1.0)
+            else:
+                cause = _slippery(trace, f)
+            if cause is not None:
+                out = Attribution(out.fault, f"{out.reason}: {cause}", {**out.evidence, "cause": cause}, out.rule)
         return out
     return verdict
 

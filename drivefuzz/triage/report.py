@@ -611,8 +611,7 @@ def _groups_md(rows: list[FindingRow]) -> list[str]:
     from drivefuzz.triage.table import bug_groups
 
     out = ["## Likely bugs", "", _GROUPS_NOTE, "", "| signatures | hits | likely bug | findings |", "|---:|---:|---|---|"]
-    out += [f"| {len(g.rows)} | {g.hits} | {_md_cell(g.title)} | {' '.join(f'#{r.number}' for r in g.rows)} |"
-            for g in bug_groups(rows)]
+    out += [f"| {len(g.rows)} | {g.hits} | {_md_cell(g.title)} | {g.numbers} |" for g in bug_groups(rows)]
     return out + [""]
 
 

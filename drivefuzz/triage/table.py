@@ -281,11 +281,15 @@ class BugGroup:
     def hits(self) -> int:
         return sum(r.hits for r in self.rows)
 
+    @property
+    def numbers(self) -> str:
+        """The findings' numbers, '#1 #3'."""
+        return " ".join(f"#{r.number}" for r in self.rows)
+
     def line(self) -> str:
         n = len(self.rows)
-        numbers = " ".join(f"#{r.number}" for r in self.rows)
         return (f"{n:>3} signature{'s' if n != 1 else ' '} {self.hits:>5} hit{'s' if self.hits != 1 else ' '}  "
-                f"{self.title}  ({numbers})")
+                f"{self.title}  ({self.numbers})")
 
 
 def bug_groups(rows) -> list[BugGroup]:
