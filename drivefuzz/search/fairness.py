@@ -20,8 +20,9 @@ no driver could get out of. After every placement, position, timing or speed cha
   metres ahead of the ego's start along its route (or behind it);
 - **obstacles leave a way on**: an immobile vehicle on the ego's route (or a walker standing or walking on a
   lane cars use, as on networks without sidewalks) does not stand in a junction's exit, and leaves another
-  lane that leads on along the route, or room to pass it and merge back; on the goal's road it stands beyond
-  the goal or leaves another lane.
+  lane that leads on along the route, or room to pass it and merge back; on the goal's road it leaves another
+  lane, or stands beyond the goal with room for a queue (``QUEUE_CARS`` cars) between the goal and its rear:
+  the cars that queue behind it on a road of one lane would otherwise stand on the goal.
 
 The ego's expected motion comes from the mutator's profile of how the reference ADS drives the empty route
 (:meth:`drivefuzz.search.mutate.Mutator._ego_profile`). Never imports libsumo.
@@ -48,6 +49,8 @@ MARGIN = 2.0  # [m] left over after a stop
 VEHICLE_LENGTH = 5.0  # [m] SUMO's default passenger car
 MERGE_ROOM = 20.0  # [m] past an obstacle, to merge back into the only lane that leads on
 JUNCTION_EXIT = 15.0  # [m] the first metres of an edge after a junction: no obstacle there
+QUEUE_CARS = 3  # cars that may queue behind an obstacle beyond the goal on a road of one lane
+QUEUE_GAP = 2.5  # [m] SUMO's default minGap between queued cars
 
 
 def stopping_distance(speed: float, decel: float, reaction: float = 0.0) -> float:
@@ -166,9 +169,16 @@ def _blocks_the_route(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
         return f"stands {actor.start_pos:.1f} m into {edge}, in the exit of the junction the ego comes through"
     others = [l for l in rmap.edge(edge).getLanes() if l.allows(PASSENGER) and l.getID() != actor.start_lane]
     if i + 1 >= len(route):  # the goal's road: the way on is another lane, or the goal lies before the obstacle
-        if others or actor.start_pos - VEHICLE_LENGTH > sc.mission.goal_pos + MARGIN:
+        rear = actor.start_pos - VEHICLE_LENGTH  # SUMO's lane position is the front bumper
+        if others:
             return None
-        return f"blocks {edge}, a road of one lane, before the ego's goal at {sc.mission.goal_pos:.1f} m"
+        if rear <= sc.mission.goal_pos + MARGIN:
+            return f"blocks {edge}, a road of one lane, before the ego's goal at {sc.mission.goal_pos:.1f} m"
+        queue = QUEUE_CARS * (VEHICLE_LENGTH + QUEUE_GAP)
+        if rear < sc.mission.goal_pos + MARGIN + queue:
+            return (f"stands {rear - sc.mission.goal_pos:.1f} m beyond the ego's goal on {edge}, a road of one "
+                    f"lane: the cars that queue behind it would stand on the goal (needs {MARGIN + queue:.1f} m)")
+        return None
     leads = {fl for fl, _tl, _via in rmap.connections(edge, route[i + 1])}
     if leads - {actor.start_lane}:
         return None  # another lane leads on
