@@ -819,3 +819,23 @@ def test_every_rule_a_verdict_names_is_described():
     assert bug_class("collision/vehicle", "ego", "") == ("collision/vehicle|ego", "collision/vehicle")
     with pytest.raises(ValueError, match="not described"):
         Attribution(Fault.EGO, "x", {}, "a_rule_nobody_described")
+
+
+def test_a_finding_on_ice_that_a_careful_driver_mastered_names_the_ice(tmp_path):
+    """A campaign's finding, kept as data (tests/data/ice_before_a_stopped_car): the ego brakes gently for the
+    parked v0 on the interchange and meets a puddle of friction 0.05 seven metres short of it; it slides into
+    v0 at 1.0 m/s. The careful driver, who brakes earlier and stops further back, stops short of v0. The
+    verdict stays the ego's, and its reason says the ego was on ice, which the user triaging it needs to know."""
+    net = Path(NET).with_name("interchange.net.xml")
+    sc, ex = kept_case(tmp_path, "ice_before_a_stopped_car", str(net))
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.kind, m.actors, m.frame) == ("collision", "vehicle", ("v0",), 304)
+    rmap = load_roadmap(net)
+    bare = attribute(sc, ex.trace, m, rmap)
+    assert bare.fault is Fault.EGO and "friction" not in bare.reason  # the rules alone do not name the ground
+    v = attribute(sc, ex.trace, m, rmap, replay=replay)
+    assert v.fault is Fault.EGO, v.reason
+    assert v.reason == ("the ego struck the stationary vehicle v0 with its front at 1.0 m/s; a careful driver avoided "
+                        "it (friction 0.05 under the ego from 11.7 s)")
+    assert v.evidence["counterfactual"]["same_failure"] is False
+    assert v.evidence["ground"] == "friction 0.05 under the ego from 11.7 s" and "cause" not in v.evidence

@@ -47,7 +47,9 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   (it does not overtake either) and never meet the other. Lane keeping is replayed only on ice or in a
   strong crosswind (the careful driver tracks its path as the reference does), and a mission time-out only
   when the ego kept moving (fog, rain and ice slow a careful driver too, and a time limit too short for
-  the route holds for everyone); such an ``other`` verdict names the ice, the wind or the fog.
+  the route holds for everyone); such an ``other`` verdict names the ice, the wind or the fog. An ``ego``
+  verdict that the careful driver avoided on the same ice names the ice too (neither driver senses friction:
+  the careful one got through by braking earlier and keeping further back).
 
 Otherwise the verdict is ``ego`` with what the ego did; ``unclear`` when the trace lacks the
 evidence (the other party is not in it, the frame is outside it).
@@ -243,6 +245,10 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
                 cause = _slippery(trace, f)
             if cause is not None:
                 out = Attribution(out.fault, f"{out.reason}: {cause}", {**out.evidence, "cause": cause}, out.rule)
+        elif out.fault is Fault.EGO and oracle != "mission":  # the careful driver mastered the same ice: say so
+            ground = _slippery(trace, f)
+            if ground is not None:
+                out = Attribution(out.fault, f"{out.reason} ({ground})", {**out.evidence, "ground": ground}, out.rule)
         return out
     return verdict
 
