@@ -839,3 +839,12 @@ def test_a_finding_on_ice_that_a_careful_driver_mastered_names_the_ice(tmp_path)
                         "it (friction 0.05 under the ego from 11.7 s)")
     assert v.evidence["counterfactual"]["same_failure"] is False
     assert v.evidence["ground"] == "friction 0.05 under the ego from 11.7 s" and "cause" not in v.evidence
+
+
+def test_free_lanes_are_listed_in_english():
+    """A highway finding read 'although hw1-AddedOffRampEdge_2, hw1-AddedOffRampEdge_1 was free'."""
+    from drivefuzz.triage.attribute import _were_free
+
+    assert _were_free(["A0B0_2"]) == "A0B0_2 was free"
+    assert _were_free(["a_2", "a_1"]) == "a_2 and a_1 were free"
+    assert _were_free(["a_3", "a_2", "a_1"]) == "a_3, a_2 and a_1 were free"

@@ -253,6 +253,13 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
     return verdict
 
 
+def _were_free(lanes: list[str]) -> str:
+    """'A was free', 'A and B were free', 'A, B and C were free'."""
+    if len(lanes) < 2:
+        return f"{''.join(lanes)} was free"
+    return f"{', '.join(lanes[:-1])} and {lanes[-1]} were free"
+
+
 def _slippery(trace, f: int, window_s: float = 6.0) -> str | None:
     """Friction under an axle below 0.5 in the ``window_s`` seconds before ``f`` (a car that slid on ice may
     leave its lane, or reach what it braked for, seconds later), described; None on grippy ground."""
@@ -647,13 +654,14 @@ class _Event:
         if queue is not None and (leads is None or str(trace["lane"][f]) in leads):  # a queue on the way on
             return self.other("queue", f"the ego waits in a queue that will move: {queue}", queue=queue, **ev)
         behind = own or next(iter(lanes.values()), None)  # mid-lane-change: the blocker of the lane it wants
+        were_free = _were_free(free)
         if behind is not None:
             if root is not None and own is not None:  # a queue that will not move: the blocker is its head
                 how = "parked" if never_moved(actor_track(trace, root), f) else "stalled"
                 ev["blocker"] = root
                 return self.ego("stayed_behind", f"the ego stayed behind the stationary {behind} in a queue that the {how} {root} "
-                                f"holds up, although {', '.join(free)} was free", decided=True, **ev)
-            return self.ego("stayed_behind", f"the ego stayed behind the stationary {behind} although {', '.join(free)} was free",
+                                f"holds up, although {were_free}", decided=True, **ev)
+            return self.ego("stayed_behind", f"the ego stayed behind the stationary {behind} although {were_free}",
                             decided=True, **ev)
-        return self.ego("stood_still", f"the ego stood still although {', '.join(free)} was free", decided=True, **ev)
+        return self.ego("stood_still", f"the ego stood still although {were_free}", decided=True, **ev)
 
