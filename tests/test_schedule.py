@@ -140,3 +140,45 @@ def test_coverage_survives_the_checkpoint():
     back = Schedule.from_json(ScheduleConfig(), s.to_json(), "risk")
     assert back.seen == {CUT_IN: 2, CROSS: 1} and back.found == [CROSS]
     assert back.weight(CUT_IN) == s.weight(CUT_IN)
+
+
+# ------------------------------------------------------------ adaptive operators
+OPS = ["target", "situation:lead_stopped", "situation:cut_in", "generate"]
+
+
+def test_operator_rewards_follow_new_findings_and_new_coverage():
+    s = Schedule(ScheduleConfig(corpus_risk=0.3, new_coverage_reward=0.5), "risk")
+    s.reward("situation:lead_stopped", CUT_IN, 0.9, finding=True)  # a finding in a situation never found: 1
+    s.reward("target", CROSS, 0.4, finding=False)  # a situation never met, risky enough: 0.5
+    s.reward("generate", CROSS, 0.1, finding=False)  # never met, but no risk: 0
+    s.observe([CUT_IN, CROSS, CROSS], [CUT_IN])
+    s.reward("situation:lead_stopped", CUT_IN, 1.0, finding=True)  # the same finding again: 0
+    s.reward("target", CROSS, 0.9, finding=False)  # met before: 0
+    assert s.operators == {"situation:lead_stopped": [1.0, 2.0], "target": [0.5, 2.0], "generate": [0.0, 1.0]}
+
+
+def test_thompson_sampling_gives_the_productive_operator_most_members_and_still_tries_the_rest():
+    s = Schedule(ScheduleConfig(), "risk")
+    s.operators = {"situation:lead_stopped": [6.0, 10.0], "target": [0.0, 30.0], "situation:cut_in": [0.0, 10.0],
+                   "generate": [0.0, 10.0]}
+    rng = random.Random(3)
+    picks = [s.choose_operator(OPS, rng) for _ in range(400)]
+    assert picks.count("situation:lead_stopped") > 300
+    assert picks.count("target") < picks.count("situation:cut_in")  # 30 fruitless uses weigh more than 10
+    assert len(set(picks)) >= 3  # the others are still tried now and then
+    # seeded: the same stream gives the same choices
+    assert [s.choose_operator(OPS, random.Random(7)) for _ in range(5)] == \
+        [s.choose_operator(OPS, random.Random(7)) for _ in range(5)]
+
+
+def test_operators_are_the_mutators_own_shares_outside_the_risk_mode_and_survive_the_checkpoint():
+    for mode in ("random", "paper"):
+        s = Schedule(ScheduleConfig(), mode)
+        s.reward("target", CROSS, 1.0, finding=True)
+        assert s.choose_operator(OPS, random.Random(0)) is None and s.operators == {}
+    assert Schedule(ScheduleConfig(adaptive_operators=False), "risk").choose_operator(OPS, random.Random(0)) is None
+    s = Schedule(ScheduleConfig(), "risk")
+    s.reward("target", CROSS, 1.0, finding=True)
+    back = Schedule.from_json(ScheduleConfig(), s.to_json(), "risk")
+    assert back.operators == {"target": [1.0, 1.0]}
+    assert back.choose_operator(OPS, random.Random(5)) == s.choose_operator(OPS, random.Random(5))

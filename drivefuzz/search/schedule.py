@@ -21,6 +21,11 @@ decides where lineages start and when they end:
   risk reaches ``corpus_risk``, enters the corpus even when it is not chosen (AFL keeps an input that
   reaches new coverage). So energy goes to risky situations that have not yet turned into findings.
 
+- **Adaptive operators** (risk feedback only): which kind of move makes each member (a targeted move, a
+  situation of the catalogue, the strategy's component: :meth:`drivefuzz.search.mutate.Mutator.operators`) is
+  drawn by Thompson sampling (:meth:`Schedule.choose_operator`) from what each kind has earned on this seed
+  (:meth:`Schedule.reward`: a finding in a new situation, or new coverage).
+
 With ``feedback="random"`` (the baseline) nothing here looks at the feedback: lineages run ``max_cycles``
 cycles and corpus entries are drawn uniformly, so that configurations differ only in what the feedback does.
 
@@ -155,7 +160,7 @@ class Schedule:
         """Credit ``operator`` with one member's result: 1 for a finding in a situation no finding of this seed
         had, ``new_coverage_reward`` for a situation never met (:meth:`is_new`), else 0. Call before
         :meth:`observe` counts the population."""
-        if self.mode != "risk" or not operator:
+        if self.mode != "risk" or not self.cfg.adaptive_operators or not operator:
             return
         if finding and situation and situation not in self.found:
             r = 1.0
