@@ -102,12 +102,15 @@ def test_successor_makes_the_kind_of_move_it_is_asked_for(town, town_scenario):
 
     mut = Mutator(town)
     sc = town_scenario
-    assert not sc.actors and mut.operators(sc, "all") == [SITUATION + s.name for s in SITUATIONS] + [GENERATE]
-    assert mut.operators(sc, "congestion") == [GENERATE]  # the catalogue belongs to 'all' and 'mix'
+    ops = mut.operators(sc, "all")  # the fixed shares: half the catalogue, half the strategy's component
+    assert not sc.actors and list(ops) == [SITUATION + s.name for s in SITUATIONS] + [GENERATE]
+    assert ops[GENERATE] == 0.5 and ops["situation:cut_in"] == pytest.approx(0.5 / len(SITUATIONS))
+    assert mut.operators(sc, "congestion") == {GENERATE: 1.0}  # the catalogue belongs to 'all' and 'mix'
     m = mut.successor(sc, "all", random.Random(1), operator=SITUATION + "lead_stopped")
     assert m.operator == "situation:lead_stopped" and m.description.startswith("situation lead_stopped:")
     sc = m.scenario
-    assert sc.actors and mut.operators(sc, "all")[0] == TARGET
+    ops = mut.operators(sc, "all")
+    assert sc.actors and list(ops)[0] == TARGET and ops[TARGET] == 0.5 and sum(ops.values()) == pytest.approx(1.0)
     t = mut.successor(sc, "all", random.Random(2), hint=sc.actors[0].id, operator=TARGET)
     assert t.operator == TARGET and t.description.startswith(f"target {sc.actors[0].id}:")
     assert mut.successor(sc, "congestion", random.Random(3), operator=GENERATE).operator == GENERATE

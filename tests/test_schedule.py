@@ -143,7 +143,7 @@ def test_coverage_survives_the_checkpoint():
 
 
 # ------------------------------------------------------------ adaptive operators
-OPS = ["target", "situation:lead_stopped", "situation:cut_in", "generate"]
+OPS = {"target": 0.5, "situation:lead_stopped": 0.125, "situation:cut_in": 0.125, "generate": 0.25}
 
 
 def test_operator_rewards_follow_new_findings_and_new_coverage():
@@ -157,15 +157,18 @@ def test_operator_rewards_follow_new_findings_and_new_coverage():
     assert s.operators == {"situation:lead_stopped": [1.0, 2.0], "target": [0.5, 2.0], "generate": [0.0, 1.0]}
 
 
-def test_thompson_sampling_gives_the_productive_operator_most_members_and_still_tries_the_rest():
+def test_thompson_sampling_moves_members_to_the_productive_operator_and_keeps_the_shares_untried():
     s = Schedule(ScheduleConfig(), "risk")
+    rng = random.Random(3)
+    untried = [s.choose_operator(OPS, rng) for _ in range(2000)]
+    assert 0.42 < untried.count("target") / 2000 < 0.58  # no evidence yet: about the fixed shares
+    assert 0.18 < untried.count("generate") / 2000 < 0.32
     s.operators = {"situation:lead_stopped": [6.0, 10.0], "target": [0.0, 30.0], "situation:cut_in": [0.0, 10.0],
                    "generate": [0.0, 10.0]}
-    rng = random.Random(3)
-    picks = [s.choose_operator(OPS, rng) for _ in range(400)]
-    assert picks.count("situation:lead_stopped") > 300
-    assert picks.count("target") < picks.count("situation:cut_in")  # 30 fruitless uses weigh more than 10
-    assert len(set(picks)) >= 3  # the others are still tried now and then
+    picks = [s.choose_operator(OPS, rng) for _ in range(2000)]
+    assert picks.count("situation:lead_stopped") > 3 * untried.count("situation:lead_stopped")
+    assert picks.count("target") < untried.count("target") / 2  # 30 fruitless uses
+    assert set(picks) == set(OPS)  # none is shut out
     # seeded: the same stream gives the same choices
     assert [s.choose_operator(OPS, random.Random(7)) for _ in range(5)] == \
         [s.choose_operator(OPS, random.Random(7)) for _ in range(5)]

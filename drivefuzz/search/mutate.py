@@ -419,15 +419,24 @@ class Mutator(RoutePlacement):
         return Mutation(gen.scenario.model_copy(update={"weather": w}), f"{gen.description}; {wdesc}", gen.retries,
                         operator)
 
-    def operators(self, sc: Scenario, strategy: str) -> list[str]:
-        """The kinds of move :meth:`successor` can make of ``sc``: a targeted move (when it has actors), each
-        situation of the catalogue (strategies 'all' and 'mix', below ``max_actors``), the strategy's component."""
+    def operators(self, sc: Scenario, strategy: str) -> dict[str, float]:
+        """The kinds of move :meth:`successor` can make of ``sc``, each with the share of members it gets without
+        a choice: a targeted move (``target_share``, when ``sc`` has actors), each situation of the catalogue
+        (an equal part of ``catalogue_share`` of the rest, strategies 'all' and 'mix', below ``max_actors``),
+        and the strategy's component (what is left). The shares sum to 1."""
         from drivefuzz.search.catalogue import SITUATIONS
 
-        ops = [TARGET] if sc.actors else []
+        rest = 1.0
+        ops: dict[str, float] = {}
+        if sc.actors:
+            ops[TARGET] = self.cfg.target_share
+            rest -= self.cfg.target_share
         if strategy in ("all", "mix") and len(sc.actors) < self.cfg.max_actors:
-            ops += [SITUATION + x.name for x in SITUATIONS]
-        return ops + [GENERATE]
+            for x in SITUATIONS:
+                ops[SITUATION + x.name] = rest * self.cfg.catalogue_share / len(SITUATIONS)
+            rest *= 1.0 - self.cfg.catalogue_share
+        ops[GENERATE] = rest
+        return ops
 
     def _target_hint(self, sc: Scenario, hint: str | None, rng: random.Random) -> Mutation | None:
         """A targeted move of ``hint`` (a random actor without one), or None when none could be made."""

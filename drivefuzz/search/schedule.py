@@ -23,8 +23,9 @@ decides where lineages start and when they end:
 
 - **Adaptive operators** (risk feedback only): which kind of move makes each member (a targeted move, a
   situation of the catalogue, the strategy's component: :meth:`drivefuzz.search.mutate.Mutator.operators`) is
-  drawn by Thompson sampling (:meth:`Schedule.choose_operator`) from what each kind has earned on this seed
-  (:meth:`Schedule.reward`: a finding in a new situation, or new coverage).
+  drawn by Thompson sampling weighted by the mutator's fixed shares (:meth:`Schedule.choose_operator`) from
+  what each kind has earned on this seed (:meth:`Schedule.reward`: a finding in a new situation, or new
+  coverage).
 
 With ``feedback="random"`` (the baseline) nothing here looks at the feedback: lineages run ``max_cycles``
 cycles and corpus entries are drawn uniformly, so that configurations differ only in what the feedback does.
@@ -142,19 +143,22 @@ class Schedule:
         self._add(Entry(ref, value, self.lineage.number, hint=hint))
 
     # ------------------------------------------------------------ operators
-    def choose_operator(self, operators: list[str], rng: random.Random) -> str | None:
+    def choose_operator(self, operators: dict[str, float], rng: random.Random) -> str | None:
         """The kind of move of the next member (risk mode with ``adaptive_operators``; else None: the mutator's
-        fixed shares). Thompson sampling: each operator's reward rate is drawn from its Beta posterior (the prior
-        plus its rewards and uses on this seed) and the highest draw wins, so operators that keep finding new
-        situations get the members, and the rest are still tried now and then."""
+        fixed shares). ``operators`` maps each kind to its fixed share. Thompson sampling, weighted by those
+        shares: each kind's reward rate is drawn from its Beta posterior (the prior plus its rewards and uses on
+        this seed), and a kind is drawn with probability proportional to its share times its draw. Untried, the
+        kinds keep their fixed shares; a kind that keeps finding new situations gains members, one that finds
+        nothing loses them, and none is shut out."""
         if self.mode != "risk" or not self.cfg.adaptive_operators or not operators:
             return None
         a0, b0 = self.cfg.operator_prior
-        draws = []
-        for op in operators:
+        names = list(operators)
+        weights = []
+        for op in names:
             r, n = self.operators.get(op, (0.0, 0.0))
-            draws.append(rng.betavariate(a0 + r, b0 + max(n - r, 0.0)))
-        return operators[max(range(len(operators)), key=draws.__getitem__)]
+            weights.append(operators[op] * rng.betavariate(a0 + r, b0 + max(n - r, 0.0)))
+        return rng.choices(names, weights=weights)[0]
 
     def reward(self, operator: str | None, situation: str | None, risk: float | None, finding: bool) -> None:
         """Credit ``operator`` with one member's result: 1 for a finding in a situation no finding of this seed
