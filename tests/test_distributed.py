@@ -119,16 +119,12 @@ def _check_complete(out: Path, n_seeds: int, killed_pid: int, killed_job: int) -
     assert len(keys) == len(set(keys)) == n_seeds * execs_per_job
     indexed = {f for (f,) in db.execute("SELECT finding FROM executions WHERE finding IS NOT NULL")}
     on_disk = {f"findings/{p.name}" for p in (out / "findings").iterdir() if not p.name.startswith(".")}
-    assert indexed == on_disk
-    # the executions found speeding, one signature: one folder, whichever worker (or the killed one) made it
-    (rel,) = [f for f in on_disk if f.endswith("-speeding")]
+    assert indexed == on_disk and len(on_disk) == 1  # the executions found speeding: one signature
+    (rel,) = on_disk
     assert (out / rel / "verdict.json").exists() and (out / rel / "routes.rou.xml").exists()
     hits = json.loads((out / rel / "hits.json").read_text())
     speeding = [k for (k,) in db.execute("SELECT key FROM executions WHERE finding = ?", (rel,))]
-    (others,) = db.execute("SELECT COUNT(*) FROM executions WHERE finding IS NOT NULL AND finding != ?",
-                           (rel,)).fetchone()  # a mutant may fail its mission first
-    assert sorted(hits["executions"]) == sorted(speeding)
-    assert hits["count"] >= n_seeds * (execs_per_job - 1) - others
+    assert sorted(hits["executions"]) == sorted(speeding) and hits["count"] >= n_seeds * (execs_per_job - 1)
 
 
 def test_scheduler_and_two_workers_survive_a_killed_worker(tmp_path, town_scenario, procs):

@@ -94,30 +94,3 @@ def test_linear_vehicles_are_placed_to_meet_the_ego(town):
             states = {o[6] for o in mut._conflicts(sc) if o[5] == node and o[7] == "M"}
             assert states & {"m", "s", "w"}  # where the ego must yield
     assert placed
-
-
-def test_successor_makes_the_kind_of_move_it_is_asked_for(town, town_scenario):
-    from drivefuzz.search.catalogue import SITUATIONS
-    from drivefuzz.search.mutate import GENERATE, SITUATION, TARGET
-
-    mut = Mutator(town)
-    sc = town_scenario
-    ops = mut.operators(sc, "all")  # the fixed shares: half the catalogue, half the strategy's component
-    assert not sc.actors and list(ops) == [SITUATION + s.name for s in SITUATIONS] + [GENERATE]
-    assert ops[GENERATE] == 0.5 and ops["situation:cut_in"] == pytest.approx(0.5 / len(SITUATIONS))
-    assert mut.operators(sc, "congestion") == {GENERATE: 1.0}  # the catalogue belongs to 'all' and 'mix'
-    m = mut.successor(sc, "all", random.Random(1), operator=SITUATION + "lead_stopped")
-    assert m.operator == "situation:lead_stopped" and m.description.startswith("situation lead_stopped:")
-    sc = m.scenario
-    ops = mut.operators(sc, "all")
-    assert sc.actors and list(ops)[0] == TARGET and ops[TARGET] == 0.5 and sum(ops.values()) == pytest.approx(1.0)
-    t = mut.successor(sc, "all", random.Random(2), hint=sc.actors[0].id, operator=TARGET)
-    assert t.operator == TARGET and t.description.startswith(f"target {sc.actors[0].id}:")
-    assert mut.successor(sc, "congestion", random.Random(3), operator=GENERATE).operator == GENERATE
-    # a targeted move with nothing to move falls back to the strategy's component
-    assert mut.successor(town_scenario, "all", random.Random(4), operator=TARGET).operator == GENERATE
-    with pytest.raises(ValueError, match="unknown situation"):
-        mut.successor(sc, "all", random.Random(5), operator="situation:no_such_thing")
-    # without an operator the mutator's shares choose, and the result says which kind they chose
-    kinds = {mut.successor(sc, "all", random.Random(k)).operator.split(":")[0] for k in range(40)}
-    assert kinds == {"target", "situation", "generate"}

@@ -31,12 +31,11 @@ def test_the_same_campaign_seed_gives_the_same_index(tmp_path, town_scenario):
 
 def _diverged(out, seed: int, town_scenario) -> int:
     """Run both feedbacks with campaign seed ``seed``; assert that every cycle whose parents differ has no
-    child in common, and return how many such cycles there were. The risk feedback's adaptive choice of
-    operators is off here, so that the two differ only in the selection."""
+    child in common, and return how many such cycles there were."""
     runs = {}
     for fb in ("risk", "random"):
         cfg = FuzzConfig(cycles=3, population=4, seed=seed, max_execs=13, feedback=fb, continue_after_finding=True,
-                         reproduce=0, adaptive_operators=False)
+                         reproduce=0)
         Campaign(out / f"{fb}-{seed}", [_seed(town_scenario)], cfg).run()
         runs[fb] = _ends(out / f"{fb}-{seed}")
     risk, rnd = runs["risk"], runs["random"]
@@ -56,22 +55,6 @@ def _diverged(out, seed: int, town_scenario) -> int:
 def test_two_feedbacks_diverge_after_their_first_different_selection(tmp_path, town_scenario):
     # a random pick may choose the riskiest member too; the next campaign seed then tries again
     assert any(_diverged(tmp_path, seed, town_scenario) for seed in (2, 3, 4, 5))
-
-
-def test_adaptive_operators_choose_the_first_population_and_learn_from_it(tmp_path, town_scenario):
-    runs = {}
-    for adaptive in (False, True):
-        cfg = FuzzConfig(cycles=2, population=4, seed=2, max_execs=9, reproduce=0, continue_after_finding=True,
-                         adaptive_operators=adaptive)
-        Campaign(tmp_path / str(adaptive), [_seed(town_scenario)], cfg).run()
-        runs[adaptive] = _ends(tmp_path / str(adaptive))
-    fixed, adaptive = runs[False], runs[True]
-    assert all(r["operator"] for r in adaptive[1:]) and all(r["operator"] for r in fixed[1:])
-    assert [r["hash"] for r in fixed[:5]] != [r["hash"] for r in adaptive[:5]]  # other draws from the first cycle on
-    ckpt = json.loads((tmp_path / "True" / "jobs" / "000" / "checkpoint.json").read_text())
-    uses = ckpt["schedule"]["operators"]
-    assert sum(n for _r, n in uses.values()) == len(adaptive) - 1  # every member credited its operator
-    assert json.loads((tmp_path / "False" / "jobs" / "000" / "checkpoint.json").read_text())["schedule"]["operators"] == {}
 
 
 def test_a_budget_is_spent_across_lineages_and_the_reason_is_given(tmp_path, town_scenario):

@@ -30,7 +30,6 @@ class FuzzConfig:
     continue_after_finding: bool = False  # a finding ends its lineage (not the campaign) unless this is set
     single_pass: bool = False  # one lineage per seed, even with a budget
     patience: int = 3  # cycles without a new best before a lineage yields
-    adaptive_operators: bool = True  # risk feedback: members' kinds of move by what each found (ScheduleConfig)
     reproduce: int = 5  # perturbed reruns of each new signature's representative (0: none)
     reproduce_incidents: bool = False  # reproduction rates of incidents too (not the ego's fault: --report-all)
     shrink: int = 10  # executions spent shrinking each new finding to a minimal reproducer (0: none)
@@ -56,15 +55,14 @@ class FuzzConfig:
 
     @property
     def schedule(self) -> ScheduleConfig:
-        return ScheduleConfig(max_cycles=self.cycles, patience=self.patience,
-                              adaptive_operators=self.adaptive_operators)
+        return ScheduleConfig(max_cycles=self.cycles, patience=self.patience)
 
     def to_json(self) -> dict[str, Any]:
         return {
             "cycles": self.cycles, "population": self.population, "strategy": self.strategy, "seed": self.seed,
             "budget_s": self.budget_s, "max_execs": self.max_execs, "feedback": self.feedback,
             "continue_after_finding": self.continue_after_finding, "single_pass": self.single_pass,
-            "patience": self.patience, "adaptive_operators": self.adaptive_operators, "reproduce": self.reproduce, "reproduce_incidents": self.reproduce_incidents,
+            "patience": self.patience, "reproduce": self.reproduce, "reproduce_incidents": self.reproduce_incidents,
             "shrink": self.shrink, "ads": self.ads.model_dump(mode="json"),
             "oracles": self.oracles.settings, "mutation": self.mutation.model_dump(mode="json"),
             "quality": self.quality.model_dump(mode="json"), "risk": self.risk.model_dump(mode="json"),
@@ -78,7 +76,6 @@ class FuzzConfig:
             budget_s=d.get("budget_s"), max_execs=d.get("max_execs"), feedback=d.get("feedback", "risk"),
             continue_after_finding=d.get("continue_after_finding", False), single_pass=d.get("single_pass", False),
             patience=d.get("patience", 3), reproduce=d.get("reproduce", 5),
-            adaptive_operators=d.get("adaptive_operators", False),  # campaigns from before it: fixed shares
             reproduce_incidents=d.get("reproduce_incidents", True),  # campaigns from before it reproduced them
             shrink=d.get("shrink", 0),
             ads=AdsSpec.model_validate(d.get("ads", {})), oracles=OracleSettings(settings=d.get("oracles", {})),

@@ -201,7 +201,7 @@ class SeedJob:
                              {"oracles": cfg.oracles.settings, "exec_timeout_s": cfg.exec_timeout_s})
 
         def execute(key: str, scenario, parent, description: str, retries: int, t_mutate: float,
-                    lineage: int, cycle: int, member: int, baseline, operator: str = "") -> dict[str, Any] | str:
+                    lineage: int, cycle: int, member: int, baseline) -> dict[str, Any] | str:
             """The record of one execution (from the journal if it ran before), or why it did not run."""
             if key in done:  # finished before a stop or a kill: reuse its result
                 return done[key]
@@ -214,7 +214,7 @@ class SeedJob:
             rec = {"event": "end", "key": key, "seed_index": self.si, "lineage": lineage, "cycle": cycle,
                    "member": member, "hash": h, "parent": parent, "mutation": description,
                    "retries": retries, "finding": None, "score": None, "risk": None, "hint": None,
-                   "components": {}, "verdict": "pass", "pid": os.getpid(), "operator": operator}
+                   "components": {}, "verdict": "pass", "pid": os.getpid()}
             self._execute_into(rec, runner, store, scenario, key, t_mutate, baseline)
             _append(self.journal, rec)
             done[key] = rec
@@ -242,20 +242,18 @@ class SeedJob:
             parent_hash = parent.content_hash()
             members: list[tuple[dict[str, Any], Any]] = []
             seen = {parent_hash}
-            operators = mutator.operators(parent, cfg.strategy)
             for member in range(cfg.population):
                 t0 = time.perf_counter()
                 for redraw in range(MAX_REDRAWS):  # a member that repeats the parent or a sibling is drawn again
                     rng = random.Random(f"{cfg.seed}/{self.si}/{lin.number}/{lin.cycle}/{parent_hash}/{member}"
                                         + (f"/{redraw}" if redraw else ""))
-                    mut = mutator.successor(parent, cfg.strategy, rng, hint=lin.hint,
-                                            operator=schedule.choose_operator(operators, rng))
+                    mut = mutator.successor(parent, cfg.strategy, rng, hint=lin.hint)
                     if (h := mut.scenario.content_hash()) not in seen:
                         break
                 seen.add(h)
                 rec = execute(f"{self.si}/{lin.number}/{lin.cycle}/{member}", mut.scenario, parent_hash,
                               mut.description, mut.retries, time.perf_counter() - t0, lin.number, lin.cycle, member,
-                              baseline, mut.operator)
+                              baseline)
                 if isinstance(rec, str):
                     return rec
                 members.append((rec, mut.scenario))
@@ -282,8 +280,6 @@ class SeedJob:
         for (rec, sc), value in zip(candidates, values):
             if schedule.is_new(rec.get("situation"), rec["risk"]):
                 schedule.add_new(self._corpus_ref(sc), value, rec.get("hint"))
-        for rec, _ in members:  # what each kind of move found (before observe() counts it as met)
-            schedule.reward(rec.get("operator"), rec.get("situation"), rec.get("risk"), bool(rec["finding"]))
         schedule.observe([rec.get("situation") for rec, _ in members],
                          [rec.get("situation") for rec, _ in members if rec["finding"]])
         if pick is None:

@@ -105,11 +105,6 @@ class Mutation:
     scenario: Scenario
     description: str
     retries: int = 0
-    operator: str = ""  # which kind of move made it (:meth:`Mutator.operators`); "" outside ``successor``
-
-
-#: The operators of :meth:`Mutator.successor`: a targeted move, a situation of the catalogue, a strategy's component.
-TARGET, SITUATION, GENERATE = "target", "situation:", "generate"
 
 
 @dataclass(frozen=True)
@@ -374,78 +369,27 @@ class Mutator(RoutePlacement):
         return Mutation(sc, f"no feasible puddle after {cfg.max_retries} retries", cfg.max_retries)
 
     # -------------------------------------------------------------- successor
-    def successor(self, sc: Scenario, strategy: str, rng: random.Random, hint: str | None = None,
-                  operator: str | None = None) -> Mutation:
+    def successor(self, sc: Scenario, strategy: str, rng: random.Random, hint: str | None = None) -> Mutation:
         """One member of a population (the job calls this once per member, each with its own ``rng``).
 
         With ``target_share``, a targeted move of the actor that carried the most risk in ``sc``'s run
         (``hint``; a random actor without one); otherwise a new component of its own, from the situation
-        catalogue (``catalogue_share``) or placed by the strategy, and then the weather. ``operator`` (one of
-        :meth:`operators`) chooses the kind of move instead of those shares; a targeted move that cannot be
-        made falls back to the strategy's component. The result's ``operator`` says which kind was made.
+        catalogue (``catalogue_share``) or placed by the strategy, and then the weather.
         """
+        if sc.actors and rng.random() < self.cfg.target_share:
+            ids = [a.id for a in sc.actors]
+            i = ids.index(hint) if hint in ids else rng.randrange(len(ids))
+            m = self.target(sc, i, rng)
+            if m.scenario is not sc:
+                return m
         from drivefuzz.search.catalogue import SITUATIONS, add_situation
 
-        if operator is None:
-            if sc.actors and rng.random() < self.cfg.target_share:
-                operator = TARGET
-            elif strategy in ("all", "mix") and rng.random() < self.cfg.catalogue_share \
-                    and len(sc.actors) < self.cfg.max_actors:
-                operator = SITUATION + rng.choice(SITUATIONS).name
-            else:
-                operator = GENERATE
-            if operator == TARGET:  # the draws of before: a failed move draws the component afresh
-                m = self._target_hint(sc, hint, rng)
-                if m is not None:
-                    return m
-                if strategy in ("all", "mix") and rng.random() < self.cfg.catalogue_share \
-                        and len(sc.actors) < self.cfg.max_actors:
-                    operator = SITUATION + rng.choice(SITUATIONS).name
-                else:
-                    operator = GENERATE
-        elif operator == TARGET:
-            m = self._target_hint(sc, hint, rng)
-            if m is not None:
-                return m
-            operator = GENERATE
-        if operator.startswith(SITUATION):
-            situation = next((x for x in SITUATIONS if x.name == operator[len(SITUATION):]), None)
-            if situation is None:
-                raise ValueError(f"unknown situation operator {operator!r}")
-            gen = add_situation(self, sc, situation, rng)
+        if strategy in ("all", "mix") and rng.random() < self.cfg.catalogue_share and len(sc.actors) < self.cfg.max_actors:
+            gen = add_situation(self, sc, rng.choice(SITUATIONS), rng)
         else:
             gen = self.generate(sc, strategy, rng)
         w, wdesc = self._mutate_weather(gen.scenario.weather, rng)
-        return Mutation(gen.scenario.model_copy(update={"weather": w}), f"{gen.description}; {wdesc}", gen.retries,
-                        operator)
-
-    def operators(self, sc: Scenario, strategy: str) -> dict[str, float]:
-        """The kinds of move :meth:`successor` can make of ``sc``, each with the share of members it gets without
-        a choice: a targeted move (``target_share``, when ``sc`` has actors), each situation of the catalogue
-        (an equal part of ``catalogue_share`` of the rest, strategies 'all' and 'mix', below ``max_actors``),
-        and the strategy's component (what is left). The shares sum to 1."""
-        from drivefuzz.search.catalogue import SITUATIONS
-
-        rest = 1.0
-        ops: dict[str, float] = {}
-        if sc.actors:
-            ops[TARGET] = self.cfg.target_share
-            rest -= self.cfg.target_share
-        if strategy in ("all", "mix") and len(sc.actors) < self.cfg.max_actors:
-            for x in SITUATIONS:
-                ops[SITUATION + x.name] = rest * self.cfg.catalogue_share / len(SITUATIONS)
-            rest *= 1.0 - self.cfg.catalogue_share
-        ops[GENERATE] = rest
-        return ops
-
-    def _target_hint(self, sc: Scenario, hint: str | None, rng: random.Random) -> Mutation | None:
-        """A targeted move of ``hint`` (a random actor without one), or None when none could be made."""
-        if not sc.actors:
-            return None
-        ids = [a.id for a in sc.actors]
-        i = ids.index(hint) if hint in ids else rng.randrange(len(ids))
-        m = self.target(sc, i, rng)
-        return None if m.scenario is sc else Mutation(m.scenario, m.description, m.retries, TARGET)
+        return Mutation(gen.scenario.model_copy(update={"weather": w}), f"{gen.description}; {wdesc}", gen.retries)
 
     def target(self, sc: Scenario, i: int, rng: random.Random) -> Mutation:
         """Move actor ``i`` where it matters: its arrival time (departure), its start along its lane, its

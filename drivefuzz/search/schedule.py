@@ -21,12 +21,6 @@ decides where lineages start and when they end:
   risk reaches ``corpus_risk``, enters the corpus even when it is not chosen (AFL keeps an input that
   reaches new coverage). So energy goes to risky situations that have not yet turned into findings.
 
-- **Adaptive operators** (risk feedback only): which kind of move makes each member (a targeted move, a
-  situation of the catalogue, the strategy's component: :meth:`drivefuzz.search.mutate.Mutator.operators`) is
-  drawn by Thompson sampling weighted by the mutator's fixed shares (:meth:`Schedule.choose_operator`) from
-  what each kind has earned on this seed (:meth:`Schedule.reward`: a finding in a new situation, or new
-  coverage).
-
 With ``feedback="random"`` (the baseline) nothing here looks at the feedback: lineages run ``max_cycles``
 cycles and corpus entries are drawn uniformly, so that configurations differ only in what the feedback does.
 
@@ -56,12 +50,6 @@ class ScheduleConfig(BaseModel):
     novelty: float = Field(default=1.0, ge=0.0, description="extra weight of a situation never met (risk mode)")
     found_weight: float = Field(default=0.5, ge=0.0, description="weight of the situation of a finding made")
     corpus_risk: float = Field(default=0.3, ge=0.0, description="risk at which a new situation enters the corpus")
-    adaptive_operators: bool = Field(default=True, description="risk mode: choose each member's kind of move by "
-                                     "Thompson sampling over what each kind has found on this seed")
-    operator_prior: tuple[float, float] = Field(default=(1.0, 4.0), description="Beta prior (successes, failures) "
-                                                "of an operator's reward")
-    new_coverage_reward: float = Field(default=0.5, ge=0.0, le=1.0, description="reward of a member that reached a "
-                                       "new situation (a finding in a new situation earns 1)")
 
 
 @dataclass
@@ -95,14 +83,12 @@ class Schedule:
     lineages: int = 0  # lineages started so far
     seen: dict[str, int] = field(default_factory=dict)  # situation -> executions that met it
     found: list[str] = field(default_factory=list)  # situations of findings made
-    operators: dict[str, list[float]] = field(default_factory=dict)  # operator -> [reward sum, uses]
 
     # ------------------------------------------------------------ state
     def to_json(self) -> dict[str, Any]:
         return {"mode": self.mode, "corpus": [asdict(e) for e in self.corpus],
                 "lineage": None if self.lineage is None else asdict(self.lineage), "lineages": self.lineages,
-                "seen": dict(self.seen), "found": list(self.found),
-                "operators": {k: list(v) for k, v in self.operators.items()}}
+                "seen": dict(self.seen), "found": list(self.found)}
 
     @classmethod
     def from_json(cls, cfg: ScheduleConfig, data: dict[str, Any] | None, mode: str) -> "Schedule":
@@ -111,8 +97,7 @@ class Schedule:
         lin = data.get("lineage")
         return cls(cfg, mode, [Entry(**e) for e in data.get("corpus", [])],
                    None if lin is None else Lineage(**lin), int(data.get("lineages", 0)),
-                   {str(k): int(v) for k, v in data.get("seen", {}).items()}, [str(x) for x in data.get("found", [])],
-                   {str(k): [float(v[0]), float(v[1])] for k, v in data.get("operators", {}).items()})
+                   {str(k): int(v) for k, v in data.get("seen", {}).items()}, [str(x) for x in data.get("found", [])])
 
     # ------------------------------------------------------------ behavioural coverage
     def weight(self, situation: str | None) -> float:
@@ -141,40 +126,6 @@ class Schedule:
         """A member that reached new coverage enters the corpus (from the current lineage)."""
         assert self.lineage is not None, "add_new() outside a lineage"
         self._add(Entry(ref, value, self.lineage.number, hint=hint))
-
-    # ------------------------------------------------------------ operators
-    def choose_operator(self, operators: dict[str, float], rng: random.Random) -> str | None:
-        """The kind of move of the next member (risk mode with ``adaptive_operators``; else None: the mutator's
-        fixed shares). ``operators`` maps each kind to its fixed share. Thompson sampling, weighted by those
-        shares: each kind's reward rate is drawn from its Beta posterior (the prior plus its rewards and uses on
-        this seed), and a kind is drawn with probability proportional to its share times its draw. Untried, the
-        kinds keep their fixed shares; a kind that keeps finding new situations gains members, one that finds
-        nothing loses them, and none is shut out."""
-        if self.mode != "risk" or not self.cfg.adaptive_operators or not operators:
-            return None
-        a0, b0 = self.cfg.operator_prior
-        names = list(operators)
-        weights = []
-        for op in names:
-            r, n = self.operators.get(op, (0.0, 0.0))
-            weights.append(operators[op] * rng.betavariate(a0 + r, b0 + max(n - r, 0.0)))
-        return rng.choices(names, weights=weights)[0]
-
-    def reward(self, operator: str | None, situation: str | None, risk: float | None, finding: bool) -> None:
-        """Credit ``operator`` with one member's result: 1 for a finding in a situation no finding of this seed
-        had, ``new_coverage_reward`` for a situation never met (:meth:`is_new`), else 0. Call before
-        :meth:`observe` counts the population."""
-        if self.mode != "risk" or not self.cfg.adaptive_operators or not operator:
-            return
-        if finding and situation and situation not in self.found:
-            r = 1.0
-        elif self.is_new(situation, risk):
-            r = self.cfg.new_coverage_reward
-        else:
-            r = 0.0
-        stats = self.operators.setdefault(operator, [0.0, 0.0])
-        stats[0] += r
-        stats[1] += 1.0
 
     # ------------------------------------------------------------ lineages
     def start_lineage(self, rng: random.Random) -> Lineage:
