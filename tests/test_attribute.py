@@ -848,3 +848,18 @@ def test_free_lanes_are_listed_in_english():
     assert _were_free(["A0B0_2"]) == "A0B0_2 was free"
     assert _were_free(["a_2", "a_1"]) == "a_2 and a_1 were free"
     assert _were_free(["a_3", "a_2", "a_1"]) == "a_3, a_2 and a_1 were free"
+
+
+def test_a_car_stalled_across_two_lanes_blocks_both(tmp_path):
+    """A campaign's finding, kept as data (tests/data/stalled_across_two_lanes): v0 set off from NC_2 to change
+    into NC_1 and stalled there at 21 degrees to the lanes, 7 m ahead of the ego, for 60 s. Its centre stood
+    2.3 m from NC_2's, so by its width alone it was not on NC_2, and the verdict was 'the ego stayed behind
+    the stationary v0 although NC_2 was free'; at that angle its footprint reaches 1 m into NC_2."""
+    net = Path(NET).with_name("intersection.net.xml")
+    sc, ex = kept_case(tmp_path, "stalled_across_two_lanes", str(net))
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.kind, m.frame) == ("immobility", "immobile", 1442)
+    v = attribute(sc, ex.trace, m, load_roadmap(net))
+    assert v.fault is Fault.OTHER, v.reason
+    assert v.reason == "every lawful way forward is blocked by stationary bodies: NC_1 by v0, NC_2 by v0"
+    assert v.rule == "blocked" and v.evidence["free_lanes"] == []

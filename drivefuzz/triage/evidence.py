@@ -431,14 +431,16 @@ def _still(track: Track, f: int, dt: float) -> bool:
 
 
 def _bodies_on(trace, rmap, lane: str, f: int, s_from: float, reach: float):
-    """(distance along ``lane`` from ``s_from`` [m], actor id, still?) of every body on ``lane`` (and
-    up to 10 m past its end, on the extended centre line) between ``s_from`` and ``s_from + reach``."""
+    """(distance along ``lane`` from ``s_from`` [m], actor id) of every body on ``lane`` (and up to 10 m past
+    its end, on the extended centre line) between ``s_from`` and ``s_from + reach``. A body is on the lane when
+    it reaches more than 0.3 m into it, by the half width of its footprint square to the lane (a car standing
+    at an angle across two lanes, stuck mid-change, reaches into both)."""
     g = rmap.geom(lane)
     a = trace.actors
     r = a.rows(f)
     out = []
     end_x, end_y, end_h = g.position(g.length)
-    for j, x, y in zip(a.actor[r], a.x[r], a.y[r]):
+    for j, x, y, h in zip(a.actor[r], a.x[r], a.y[r], a.heading[r]):
         j = int(j)
         pos, lat = g.project(float(x), float(y))
         if pos >= g.length - 0.01:  # past the end: along the extended last segment
@@ -447,7 +449,11 @@ def _bodies_on(trace, rmap, lane: str, f: int, s_from: float, reach: float):
             lat = -dx * math.sin(end_h) + dy * math.cos(end_h)
             if pos > g.length + 10.0:
                 continue
-        if abs(lat) > g.width / 2 + a.width[j] / 2 - 0.3 or not (s_from < pos < s_from + reach):
+        if not (s_from < pos < s_from + reach):
+            continue
+        skew = float(h) - g.position(min(max(pos, 0.0), g.length))[2]
+        half = 0.5 * (float(a.length[j]) * abs(math.sin(skew)) + float(a.width[j]) * abs(math.cos(skew)))
+        if abs(lat) > g.width / 2 + half - 0.3:
             continue
         out.append((pos - s_from, a.ids[j]))
     return sorted(out)
