@@ -94,3 +94,27 @@ def test_linear_vehicles_are_placed_to_meet_the_ego(town):
             states = {o[6] for o in mut._conflicts(sc) if o[5] == node and o[7] == "M"}
             assert states & {"m", "s", "w"}  # where the ego must yield
     assert placed
+
+
+def test_every_kind_of_move_is_named_in_its_description(town, town_scenario):
+    """tools/eval_operators.py sorts executions by kind of move from their mutation descriptions: each
+    successor's description must name a situation, a targeted aspect or a strategy's component."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parent.parent / "tools" / "eval_operators.py"
+    spec = importlib.util.spec_from_file_location("eval_operators", path)
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    mut = Mutator(town)
+    sc, kinds = town_scenario, set()
+    for k in range(60):
+        m = mut.successor(sc, ("all", "entropy", "instability")[k % 3], random.Random(k),
+                          hint=sc.actors[0].id if sc.actors else None)
+        kind = tool.kind_of(m.description)
+        assert kind.split()[0] in ("situation", "target", "add"), (kind, m.description)
+        kinds.add(kind.split()[0])
+        if k % 4 == 0 and len(m.scenario.actors) < 6:
+            sc = m.scenario
+    assert kinds == {"situation", "target", "add"}
+    assert tool.kind_of("the seed as it is") == ""
