@@ -452,6 +452,8 @@ def _bodies_on(trace, rmap, lane: str, f: int, s_from: float, reach: float):
         if not (s_from < pos < s_from + reach):
             continue
         skew = float(h) - g.position(min(max(pos, 0.0), g.length))[2]
+        if not math.isfinite(skew):  # no heading in the trace: square to the lane, by its width alone
+            skew = 0.0
         half = 0.5 * (float(a.length[j]) * abs(math.sin(skew)) + float(a.width[j]) * abs(math.cos(skew)))
         if abs(lat) > g.width / 2 + half - 0.3:
             continue
