@@ -50,7 +50,7 @@ VEHICLE_LENGTH = 5.0  # [m] SUMO's default passenger car
 MERGE_ROOM = 20.0  # [m] past an obstacle, to merge back into the only lane that leads on
 JUNCTION_EXIT = 15.0  # [m] the first metres of an edge after a junction: no obstacle there
 QUEUE_CARS = 3  # cars that may queue behind an obstacle beyond the goal on a road of one lane
-QUEUE_GAP = 2.5  # [m] SUMO's default minGap between queued cars
+SUMO_MIN_GAP = 2.5  # [m] SUMO's default minGap between queued cars
 
 
 def stopping_distance(speed: float, decel: float, reaction: float = 0.0) -> float:
@@ -174,7 +174,7 @@ def _blocks_the_route(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
             return None
         if rear <= sc.mission.goal_pos + MARGIN:
             return f"blocks {edge}, a road of one lane, before the ego's goal at {sc.mission.goal_pos:.1f} m"
-        queue = QUEUE_CARS * (VEHICLE_LENGTH + QUEUE_GAP)
+        queue = QUEUE_CARS * (VEHICLE_LENGTH + SUMO_MIN_GAP)
         if rear < sc.mission.goal_pos + MARGIN + queue:
             return (f"stands {rear - sc.mission.goal_pos:.1f} m beyond the ego's goal on {edge}, a road of one "
                     f"lane: the cars that queue behind it would stand on the goal (needs {MARGIN + queue:.1f} m)")
