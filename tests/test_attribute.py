@@ -863,3 +863,29 @@ def test_a_car_stalled_across_two_lanes_blocks_both(tmp_path):
     assert v.fault is Fault.OTHER, v.reason
     assert v.reason == "every lawful way forward is blocked by stationary bodies: NC_1 by v0, NC_2 by v0"
     assert v.rule == "blocked" and v.evidence["free_lanes"] == []
+
+
+def test_a_stationary_ego_reaching_into_the_next_lane_stood_in_its_way(tmp_path):
+    """A campaign's incident, kept as data (tests/data/nose_in_the_next_lane): on the interchange's on-ramp the
+    ego began to move over from the acceleration lane and stopped half-way, at 7 degrees, its body 0.8 m into
+    the through lane, for 5 s. v4 came along the through lane (SUMO's drivers do not see a body whose centre
+    is in another lane) and struck the ego's front corner. The verdict was 'the ego was stationary when v4
+    struck its front' (other); the ego stood in v4's way, and the careful driver's replay was not struck."""
+    from drivefuzz.triage.evidence import ego_reach_into
+
+    net = Path(NET).with_name("interchange.net.xml")
+    sc, ex = kept_case(tmp_path, "nose_in_the_next_lane", str(net))
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.kind, m.actors, m.frame) == ("collision", "vehicle", ("v4",), 749)
+    assert ex.trace["speed"][m.frame - 10:m.frame + 1].max() == 0.0  # it stood still
+    rmap = load_roadmap(net)
+    v = attribute(sc, ex.trace, m, rmap)
+    assert v.fault is Fault.EGO and v.rule == "stood_in_lane", v.reason
+    assert v.reason == ("the ego stood 0.8 m into WB2-AddedOnRampEdge_1, the lane of the vehicle v4, which kept to "
+                        "it and struck its front")
+    assert v.evidence["other_lane"] == "WB2-AddedOnRampEdge_1" and 0.7 < v.evidence["ego_reach"] < 0.9
+    # 10 s earlier the ego drove within its own lane, 0.8 m clear of the through lane's edge
+    assert -0.9 < ego_reach_into(ex.trace, rmap, "WB2-AddedOnRampEdge_1", m.frame - 200) < -0.7
+    v = attribute(sc, ex.trace, m, rmap, replay=replay)
+    assert v.fault is Fault.EGO and v.reason.endswith("; a careful driver avoided it"), v.reason
+

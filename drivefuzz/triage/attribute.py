@@ -10,7 +10,9 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   0. (``ego``, decided) the ego entered the junction on red; its link had to yield to the other's;
      it changed lanes into a vehicle alongside (moved sideways towards it more than it came);
   1. *stationary*: the ego stood still when it was struck, since :data:`STOPPED_BEFORE` seconds at least
-     (and stood where it may: it had not just crossed a stop line on red);
+     (and stood where it may: it had not just crossed a stop line on red, and it did not reach more than
+     :data:`IN_LANE_MARGIN` into the lane of a vehicle that kept that lane and struck it; such an ego stood in
+     that vehicle's way, the ego's fault unless the careful driver's replay is struck too);
   2. *rear*: the ego was struck in its rear half while lawfully in its lane (no lane change in
      the last :data:`LANE_CHANGE_WINDOW` seconds, no red light crossed) and it had not braked
      harder than :data:`COMFORT_DECEL` without a hazard ahead;
@@ -79,10 +81,12 @@ from drivefuzz.triage.evidence import (
     contact_side,
     cut_in,
     ego_link,
+    ego_reach_into,
     first_visible,
     frames_before,
     gap_ahead,
     held_up,
+    kept_lane,
     lane_changed,
     never_moved,
     other_link,
@@ -103,6 +107,9 @@ APPROACH_WINDOW = 2.0
 STOPPED_BEFORE = 0.25
 #: [s] before a contact, over which a vehicle that moved into the ego's lane counts as cutting in.
 CUT_IN_WINDOW = 4.0
+#: [m] how far a stationary ego may reach across the edge of the lane of a vehicle that strikes it (mirrors and a
+#: centre line drawn a little off) before it stood in that vehicle's way.
+IN_LANE_MARGIN = 0.3
 
 
 def _travelled(x: np.ndarray, y: np.ndarray) -> float:
@@ -151,6 +158,7 @@ RULES: dict[str, str] = {
     "no_blocker": "it stood still with nothing in its way",
     "stayed_behind": "it stayed behind a stationary body with a lane free",
     "stood_still": "it stood still with a lane free",
+    "stood_in_lane": "it stood reaching into another's lane, in its way",
     # another's
     "stationary_struck": "it was struck while standing still",
     "rear_ended": "it was struck from behind while driving lawfully",
@@ -377,8 +385,8 @@ class _Event:
                 return self.ego("lane_change_into", f"the ego changed lanes into the vehicle {oth.id} alongside (it moved {moved[0]:.1f} m "
                                 f"sideways towards it, {oth.id} {round(moved[1], 1) + 0.0:.1f} m)", decided=True,
                                 ego_sideways=moved[0], other_sideways=moved[1])
-        for rule in (self.rule_stationary, self.rule_rear, self.rule_cut_in, self.rule_right_of_way,
-                     self.rule_pedestrian):
+        for rule in (self.rule_in_its_lane, self.rule_stationary, self.rule_rear, self.rule_cut_in,
+                     self.rule_right_of_way, self.rule_pedestrian):
             verdict = rule(oth, point, side, red)
             if verdict is not None:
                 return verdict
@@ -398,10 +406,32 @@ class _Event:
         return self.ego("struck", f"the ego struck the {what} {oth.id} with its {side} at {impact:.1f} m/s",
                         impact_speed=impact)
 
-    def rule_stationary(self, oth: Track, point, side: str, red) -> Attribution | None:
+    def _stood(self, red) -> bool:
+        """Whether the ego stood still since :data:`STOPPED_BEFORE` before the contact, on a lane, and not just
+        past a stop line on red."""
         trace, f = self.trace, self.f
         w = frames_before(trace, f, STOPPED_BEFORE)
-        if float(np.max(trace["speed"][w])) > STATIONARY_SPEED or red is not None or not trace["lane"][f]:
+        return float(np.max(trace["speed"][w])) <= STATIONARY_SPEED and red is None and bool(trace["lane"][f])
+
+    def rule_in_its_lane(self, oth: Track, point, side: str, red) -> Attribution | None:
+        """A stationary ego that reached more than :data:`IN_LANE_MARGIN` into the lane of a vehicle that kept
+        that lane stood in its way (stopped at an angle, its nose in the next lane while it waited to merge):
+        SUMO's drivers do not see a body whose centre is in another lane, and a careful driver does not stop so.
+        The ego's, unless the careful driver's replay is struck too."""
+        if oth.kind != "vehicle" or not self._stood(red) or not self._came_to_ego(oth):
+            return None
+        trace, f = self.trace, self.f
+        lane = kept_lane(self.rmap, oth, range(frames_before(trace, f, APPROACH_WINDOW).start, f + 1))
+        if lane is None or lane == str(trace["lane"][f]):
+            return None
+        reach = ego_reach_into(trace, self.rmap, lane, f)
+        if reach is None or reach <= IN_LANE_MARGIN:
+            return None
+        return self.ego("stood_in_lane", f"the ego stood {reach:.1f} m into {lane}, the lane of the vehicle {oth.id}, "
+                        f"which kept to it and struck its {side}", other_lane=lane, ego_reach=round(reach, 3))
+
+    def rule_stationary(self, oth: Track, point, side: str, red) -> Attribution | None:
+        if not self._stood(red):
             return None
         # an ego creeping below the stationary speed into a body that stood still (a waiting car's throttle-brake
         # chatter) struck it, whatever its speedometer said

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 
@@ -430,6 +431,45 @@ def _still(track: Track, f: int, dt: float) -> bool:
     return len(w) > 0 and float(np.max(w)) <= 0.2
 
 
+def footprint_half(length: float, width: float, skew: float) -> float:
+    """[m] half the width of a body's footprint square to a lane it stands at ``skew`` [rad] to (a car at an
+    angle across a lane covers more of it than its width); by the width alone when the skew is unknown (NaN)."""
+    if not math.isfinite(skew):
+        skew = 0.0
+    return 0.5 * (length * abs(math.sin(skew)) + width * abs(math.cos(skew)))
+
+
+def ego_reach_into(trace, rmap, lane: str, f: int) -> float | None:
+    """[m] how far the ego's body reached across the edge of ``lane`` (a normal lane) into it at ``f``, by its
+    footprint square to the lane (negative: it stayed clear of it); None beside either end of the lane."""
+    if not lane or lane.startswith(":") or not rmap.has_lane(lane):
+        return None
+    g = rmap.geom(lane)
+    pos, lat = g.project(float(trace["x"][f]), float(trace["y"][f]))
+    if not 0.0 < pos < g.length:
+        return None
+    half = footprint_half(float(trace.meta.get("ego_length", EGO_LENGTH)), float(trace.meta.get("ego_width", EGO_WIDTH)),
+                          float(trace["heading"][f]) - g.position(pos)[2])
+    return g.width / 2 + half - abs(lat)
+
+
+def kept_lane(rmap, oth: Track, frames: Sequence[int]) -> str | None:
+    """The normal lane ``oth`` kept its centre on over ``frames`` (present in all, nearest the same passenger
+    lane within 3 m, and within that lane's width), or None."""
+    lane = None
+    for k in frames:
+        if not oth.present(k):
+            return None
+        here = _lane_of(rmap, float(oth.x[k]), float(oth.y[k]), internal=False)
+        if here is None or (lane is not None and here != lane):
+            return None
+        lane = here
+        g = rmap.geom(lane)
+        if abs(g.project(float(oth.x[k]), float(oth.y[k]))[1]) > g.width / 2:
+            return None
+    return lane
+
+
 def _bodies_on(trace, rmap, lane: str, f: int, s_from: float, reach: float):
     """(distance along ``lane`` from ``s_from`` [m], actor id) of every body on ``lane`` (and up to 10 m past
     its end, on the extended centre line) between ``s_from`` and ``s_from + reach``. A body is on the lane when
@@ -451,10 +491,8 @@ def _bodies_on(trace, rmap, lane: str, f: int, s_from: float, reach: float):
                 continue
         if not (s_from < pos < s_from + reach):
             continue
-        skew = float(h) - g.position(min(max(pos, 0.0), g.length))[2]
-        if not math.isfinite(skew):  # no heading in the trace: square to the lane, by its width alone
-            skew = 0.0
-        half = 0.5 * (float(a.length[j]) * abs(math.sin(skew)) + float(a.width[j]) * abs(math.cos(skew)))
+        half = footprint_half(float(a.length[j]), float(a.width[j]),
+                              float(h) - g.position(min(max(pos, 0.0), g.length))[2])
         if abs(lat) > g.width / 2 + half - 0.3:
             continue
         out.append((pos - s_from, a.ids[j]))
