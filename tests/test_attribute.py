@@ -889,3 +889,22 @@ def test_a_stationary_ego_reaching_into_the_next_lane_stood_in_its_way(tmp_path)
     v = attribute(sc, ex.trace, m, rmap, replay=replay)
     assert v.fault is Fault.EGO and v.reason.endswith("; a careful driver avoided it"), v.reason
 
+
+
+def test_a_leader_at_walking_pace_on_the_ring_held_the_ego_up(tmp_path):
+    """A campaign's finding, kept as data (tests/data/crawling_leader_on_the_ring): on the roundabout's one-lane
+    ring v0 slowed to 0.84 m/s 8 m ahead of the ego and drove so to the exit; the ego followed it for 66 s and
+    timed out 21 m short of its goal. held_up looked along the ego's arc only above 1 m/s, so at a crawl it
+    looked straight ahead, 1.3 m beside v0 in the bend: the verdict was 'the ego did not reach its goal in
+    time' (ego). It was held up behind slower traffic it could not pass."""
+    from drivefuzz.triage.evidence import held_up
+
+    net = Path(NET).with_name("roundabout.net.xml")
+    sc, ex = kept_case(tmp_path, "crawling_leader_on_the_ring", str(net))
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.kind, m.frame) == ("mission", "timeout", 1800)
+    share, leader = held_up(ex.trace, m.frame)
+    assert leader == "v0" and 0.6 < share < 0.7
+    v = attribute(sc, ex.trace, m, load_roadmap(net))
+    assert v.fault is Fault.OTHER and v.rule == "held_up", v.reason
+    assert v.reason == "held up behind slower traffic (v0) for 66% of the run"

@@ -682,7 +682,8 @@ def held_up(trace, f: int, gap: float = 30.0) -> tuple[float, str] | None:
         r = a.rows(k)
         lim = trace["speed_limit"][k]
         speed = float(trace["speed"][k])
-        curvature = float(trace["yaw_rate"][k]) / speed if speed > 1.0 else 0.0
+        # the arc it turns on, also at a crawl behind a leader at walking pace (a standstill has none)
+        curvature = float(trace["yaw_rate"][k]) / speed if speed > STATIONARY_SPEED else 0.0
         radius = 1.0 / min(abs(curvature), MAX_CURVATURE) if curvature else math.inf
         for j, x, y, v in zip(a.actor[r], a.x[r], a.y[r], a.speed[r]):
             lx, ly = to_local(trace, k, float(x), float(y))
