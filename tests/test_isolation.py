@@ -151,3 +151,22 @@ def test_a_crashed_host_leaves_no_temporary_folder(town_scenario):
         assert host._tmp is None  # removed with the dead child
         mine = leftovers() - before
     assert not mine
+
+
+def test_the_host_imports_the_drivefuzz_of_its_parent_also_from_the_current_folder(monkeypatch):
+    """The current folder is left off the host's import path; a checkout that is the current folder (a tool run
+    in a second worktree while another drivefuzz is installed) must still be what the host imports."""
+    import drivefuzz
+    from drivefuzz.sim import simhost
+
+    root = os.path.dirname(os.path.dirname(os.path.abspath(drivefuzz.__file__)))
+    monkeypatch.chdir(root)
+    monkeypatch.delenv("PYTHONPATH", raising=False)
+    path = SimHost._pythonpath()
+    assert path.split(os.pathsep)[0] == root
+    probe = simhost._BOOTSTRAP.replace("from drivefuzz.sim.simhost import _serve; _serve()",
+                                       "import drivefuzz; print(drivefuzz.__file__)")
+    assert probe != simhost._BOOTSTRAP
+    out = subprocess.run([sys.executable, "-I", "-c", probe], capture_output=True, text=True, cwd=root,
+                         env={**os.environ, simhost.PATH_ENV: path}, check=True).stdout.strip()
+    assert os.path.abspath(out) == os.path.abspath(drivefuzz.__file__)

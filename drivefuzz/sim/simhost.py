@@ -141,7 +141,10 @@ class SimHost:
 
     @staticmethod
     def _pythonpath() -> str:
-        """The parent's import path for the child, less the current folder (unless PYTHONPATH names it)."""
+        """The parent's import path for the child, less the current folder (unless PYTHONPATH names it), and led
+        by the folder this drivefuzz was imported from: the host runs the same drivefuzz as its parent, also when
+        that is a checkout that is the current folder while another drivefuzz is installed (a benchmark run in a
+        second worktree once timed the installed executor in both of its arms)."""
         try:
             cwd = os.getcwd()
         except OSError:  # the current folder was deleted
@@ -156,6 +159,9 @@ class SimHost:
                 continue
             if p not in keep:
                 keep.append(p)
+        root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # holds drivefuzz/
+        if root not in keep:
+            keep.insert(0, root)
         return os.pathsep.join(keep)
 
     def _start(self) -> None:
