@@ -448,8 +448,8 @@ def ego_reach_into(trace, rmap, lane: str, f: int) -> float | None:
     pos, lat = g.project(float(trace["x"][f]), float(trace["y"][f]))
     if not 0.0 < pos < g.length:
         return None
-    half = footprint_half(float(trace.meta.get("ego_length", EGO_LENGTH)), float(trace.meta.get("ego_width", EGO_WIDTH)),
-                          float(trace["heading"][f]) - g.position(pos)[2])
+    length, width = float(trace.meta.get("ego_length", EGO_LENGTH)), float(trace.meta.get("ego_width", EGO_WIDTH))
+    half = footprint_half(length, width, float(trace["heading"][f]) - g.position(pos)[2])
     return g.width / 2 + half - abs(lat)
 
 
