@@ -4,16 +4,19 @@
 ``careful``); if it fails the same way, a careful human-like driver could not have avoided the
 situation either, and the finding is not the ego's fault.
 
-It is the reference ADS (same sensing, perception, path and actuation) with three habits on top,
-applied after the reference has chosen its control, through public hooks only (its options and
-the tracks its perception keeps), so it follows the reference as that changes:
+It is the reference ADS (same sensing, perception, path and actuation) with four habits on top,
+applied through public hooks only (the observation it passes on, its options, the tracks its
+perception keeps and the control the reference chose), so it follows the reference as that changes:
 
 - it brakes at once, fully, for any hazard within its stopping distance (plus a margin), a
   hazard being a tracked body in its path corridor now or, for pedestrians and moving vehicles,
   predicted there within :data:`HORIZON` s by the time the car would get there;
 - it keeps a larger headway (:attr:`Options.headway`, default 2 s) to vehicles in its path;
 - where fog or rain shorten its sensor range, it drives no faster than it can stop from comfortably
-  within 60 % of what it sees; it aims at a lower fraction of the speed limit.
+  within 60 % of what it sees; it aims at a lower fraction of the speed limit;
+- a low sun ahead does not blind it to the traffic lights: a driver shades the eyes and reads the light,
+  where the reference's camera sees none and holds the last state it saw (a red can then hold it for
+  good at a green light).
 
 Units: SI, radians ENU.
 """
@@ -21,6 +24,7 @@ Units: SI, radians ENU.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 from drivefuzz.ads import Control, Observation
 
@@ -56,6 +60,8 @@ class CarefulADS(ReferenceADS):
         self._cruise = float(self.options.cruise_speed)
 
     def step(self, obs: Observation) -> Control:
+        if obs.sun_glare:
+            obs = replace(obs, sun_glare=False)
         self.options.cruise_speed = self._visibility_cap(obs)
         control = super().step(obs)
         if self.options.fault == "no_control":

@@ -908,3 +908,29 @@ def test_a_leader_at_walking_pace_on_the_ring_held_the_ego_up(tmp_path):
     v = attribute(sc, ex.trace, m, load_roadmap(net))
     assert v.fault is Fault.OTHER and v.rule == "held_up", v.reason
     assert v.reason == "held up behind slower traffic (v0) for 66% of the run"
+
+
+def test_blinded_by_a_low_sun_at_a_green_light_is_the_egos(tmp_path):
+    """A campaign's incident, kept as data (tests/data/blinded_at_a_green_light): on the interchange the ego
+    stopped at tN's red, turning west into a sun 2.9 degrees above the horizon. Its camera, blinded, saw no
+    light from then on, and its perception held the last state it saw: red. It stood 1 m before the stop line
+    through two green phases, nothing ahead of it, until the immobility oracle fired at 155 s. The careful
+    driver's replay shared the blindness and stood too, so the verdict was 'other'. A driver shades the eyes
+    and reads the light: the careful driver now does, goes at green, and the verdict is the ego's."""
+    from drivefuzz.oracle import OracleSettings
+
+    net = Path(NET).with_name("interchange.net.xml")
+    sc, ex = kept_case(tmp_path, "blinded_at_a_green_light", str(net))
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.kind, m.actors, m.frame) == ("immobility", "immobile", (), 3101)
+    standing = slice(int(20.0 / ex.trace.step_length), m.frame + 1)
+    assert ex.trace["speed"][standing].max() == 0.0
+    assert "G" in set(ex.trace.ego["tls_state"][standing])  # green came, and went, and came again
+
+    def run(s):
+        got = execute(s, oracles=OracleSettings().instantiate())
+        return got.misbehaviors, got.trace
+
+    v = attribute(sc, ex.trace, m, load_roadmap(net), replay=run)
+    assert v.fault is Fault.EGO and v.reason.endswith("a careful driver avoided it"), v.reason
+    assert v.evidence["counterfactual"]["misbehaviors"] == []
