@@ -934,3 +934,67 @@ def test_blinded_by_a_low_sun_at_a_green_light_is_the_egos(tmp_path):
     v = attribute(sc, ex.trace, m, load_roadmap(net), replay=run)
     assert v.fault is Fault.EGO and v.reason.endswith("a careful driver avoided it"), v.reason
     assert v.evidence["counterfactual"]["misbehaviors"] == []
+
+
+def _to_a_light(states_by_distance, v0=10.0, decel=2.0, brake_from=20.0, d0=60.0):
+    """A synthetic approach: the ego drives east at ``v0`` m/s towards a stop line ``d0`` m ahead, braking at
+    ``decel`` from ``brake_from`` m out, and enters the junction; the light shows, by distance to the line,
+    ``states_by_distance`` [(from_m, state), ...] (nearest last)."""
+    from drivefuzz.sim.trace import trace_from_arrays
+
+    dt, x, v = 0.05, 0.0, v0
+    xs, vs, states, dists, lanes = [], [], [], [], []
+    while x < d0 + 1.0:
+        d = d0 - x
+        xs.append(x), vs.append(v)
+        state = next(s for m, s in reversed(states_by_distance) if d <= m) if d > 0 else ""
+        states.append(state), dists.append(d if d > 0 else math.nan), lanes.append("WC_2" if d > 0 else ":C_15_0")
+        if d <= brake_from:
+            v = max(v - decel * dt, 1.0)
+        x += v * dt
+    n = len(xs)
+    return trace_from_arrays({"x": np.array(xs), "y": np.zeros(n), "heading": np.zeros(n), "speed": np.array(vs),
+                              "tls_state": states, "tls_dist": np.array(dists), "lane": lanes},
+                             {"step_length": dt}), lanes.index(":C_15_0")
+
+
+def test_a_red_light_run_is_described_by_its_approach():
+    from drivefuzz.triage.evidence import red_approach
+
+    trace, f = _to_a_light([(1000.0, "G"), (30.0, "y"), (22.0, "r")])
+    app = red_approach(trace, f)
+    assert not app.from_start and app.state == "y" and 29.5 < app.distance <= 30.0
+    assert app.speed == pytest.approx(10.0) and app.needed == pytest.approx(100.0 / (2 * app.distance))
+    assert app.braked == pytest.approx(2.0, abs=0.01) and app.entry_speed == pytest.approx(trace["speed"][f])
+    assert app.describe().startswith(f"the light turned yellow {app.distance:.1f} m out at 10.0 m/s (a stop needed 1.7")
+    trace, f = _to_a_light([(1000.0, "r")])
+    app = red_approach(trace, f)
+    assert app.from_start and app.onset == 0 and app.distance == pytest.approx(60.0)
+    assert app.describe().startswith("the light was red all along from 60.0 m out; over its last 40 m it braked at "
+                                     "most 2.0 m/s^2 and entered at ")
+    trace, f = _to_a_light([(1000.0, "G")])  # entered on green: nothing to describe
+    assert red_approach(trace, f) is None
+
+
+def test_a_red_light_run_names_the_low_sun_and_the_fog():
+    """The reference ADS with its lights ignored runs town seed 005's red; into a low sun and in fog the verdict
+    says so, and keeps the approach in its evidence."""
+    from drivefuzz.oracle import OracleSettings
+    from drivefuzz.scenario import Weather
+    from drivefuzz.scenario.sumofiles import read_scenario
+
+    net = Path(NET)
+    seed = read_scenario(net.parent.parent / "seeds" / "town" / "005")
+    # the ego enters heading north (ENU 90 deg): a sun due north, 5 deg up, is in its eyes
+    weather = Weather(fog=90.0, sun_azimuth_deg=0.0, sun_altitude_deg=5.0)
+    sc = seed.model_copy(update={"ads": AdsSpec(name="ego", options={"fault": "no_traffic_lights"}),
+                                 "weather": weather})
+    ex = execute(sc, oracles=OracleSettings().instantiate())
+    m = next(m for m in ex.misbehaviors if m.oracle == "red_light")
+    v = attribute(sc, ex.trace, m, load_roadmap(net))
+    assert v.fault is Fault.EGO and v.rule == "own_driving"
+    assert v.reason.startswith("the ego's own driving: red_light/red: the light was red all along from ")
+    assert "; a low sun ahead (altitude 5.0 deg) dazzled it from " in v.reason
+    assert v.reason.endswith("; fog 90 limits the sensors to 24 m")
+    assert v.evidence["dazzled"] is True and v.evidence["light_at_onset"] == "r"
+    assert v.evidence["decel_max"] < 3.5 and f"entered at {m.details['speed']:.1f} m/s" in v.reason

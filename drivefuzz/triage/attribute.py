@@ -92,6 +92,7 @@ from drivefuzz.triage.evidence import (
     other_link,
     path_entry,
     ran_red,
+    red_approach,
     sensor_range,
     sideways_into,
     signal_state,
@@ -287,8 +288,21 @@ def _short_sight(scenario) -> str | None:
     rng = sensor_range(w)
     if rng >= SHORT_SIGHT:
         return None
-    what = " and ".join(f"{name} {value:.0f}" for name, value in (("fog", w.fog), ("rain", w.rain)) if value > 0)
-    return f"{what} limit the sensors to {rng:.0f} m"
+    causes = [f"{name} {value:.0f}" for name, value in (("fog", w.fog), ("rain", w.rain)) if value > 0]
+    return f"{' and '.join(causes)} limit{'s' if len(causes) == 1 else ''} the sensors to {rng:.0f} m"
+
+
+def _dazzled(scenario, trace, k0: int, f: int) -> str | None:
+    """A low sun ahead of the ego (the observation's ``sun_glare``) between frames ``k0`` and ``f``, described
+    from where it began; None when the sun was never in its eyes."""
+    from drivefuzz.sim.world import sun_glare
+
+    w = scenario.weather
+    heading, dist = trace["heading"], trace["tls_dist"]
+    for k in range(k0, f):
+        if sun_glare(w, float(heading[k])):
+            return f"a low sun ahead (altitude {w.sun_altitude_deg:.1f} deg) dazzled it from {float(dist[k]):.1f} m out"
+    return None
 
 
 def _windy(scenario) -> str | None:
@@ -357,10 +371,27 @@ class _Event:
             return self.collision()
         if oracle in ("immobility", "mission"):
             return self.standstill()
-        # a red light or the speed limit binds whatever the others do; lane keeping may be lost to wind
-        # or ice, which the counterfactual can show
-        return self.ego("own_driving", f"the ego's own driving: {oracle}/{self.mb.kind}",
-                        decided=oracle in ("red_light", "speeding"))
+        if oracle == "red_light":
+            return self.red_light()
+        # the speed limit binds whatever the others do; lane keeping may be lost to wind or ice, which the
+        # counterfactual can show
+        return self.ego("own_driving", f"the ego's own driving: {oracle}/{self.mb.kind}", decided=oracle == "speeding")
+
+    def red_light(self) -> Attribution:
+        """A red light binds whatever the others do: the ego's, with how it came to the light and what kept
+        it from seeing it (a low sun ahead, fog or rain), for whoever triages it."""
+        head = f"the ego's own driving: {self.mb.oracle}/{self.mb.kind}"
+        app = red_approach(self.trace, self.f)
+        if app is None:
+            return self.ego("own_driving", head, decided=True)
+        notes = [app.describe()]
+        glare = _dazzled(self.scenario, self.trace, app.onset, self.f)
+        sight = _short_sight(self.scenario)
+        notes += [n for n in (glare, sight) if n]
+        return self.ego("own_driving", f"{head}: {'; '.join(notes)}", decided=True,
+                        light_onset_frame=app.onset, light_at_onset=app.state,
+                        distance_at_onset=round(app.distance, 2), speed_at_onset=round(app.speed, 2),
+                        decel_needed=round(app.needed, 2), decel_max=round(app.braked, 2), dazzled=glare is not None)
 
     # ------------------------------------------------------------------ collisions
     def collision(self) -> Attribution:

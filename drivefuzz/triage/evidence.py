@@ -141,6 +141,58 @@ def ran_red(trace, f: int, seconds: float = 10.0) -> int | None:
     return None
 
 
+#: [m] before the stop line over which the ego's braking for a red light is read.
+RED_APPROACH_M = 40.0
+
+
+@dataclass(frozen=True)
+class RedApproach:
+    """How the ego came to a red light it entered at frame ``f``: from the frame its light last stopped showing
+    green (``onset``; the first recorded frame of this light when it showed no green before)."""
+
+    onset: int
+    state: str  # the light's state at the onset: 'y' (yellow) or a stop state
+    distance: float  # [m] from the front bumper to the stop line at the onset
+    speed: float  # [m/s] at the onset
+    needed: float  # [m/s^2] the constant deceleration that stops the car at the line from the onset
+    braked: float  # [m/s^2] its hardest deceleration over the last RED_APPROACH_M (or from the onset, if later)
+    entry_speed: float  # [m/s] at the entry
+    from_start: bool  # the light showed no green in the whole recorded approach
+
+    def describe(self) -> str:
+        if self.from_start:
+            how = f"the light was red all along from {self.distance:.1f} m out"
+        else:
+            how = (f"the light turned {'yellow' if self.state in 'yY' else 'red'} {self.distance:.1f} m out at "
+                   f"{self.speed:.1f} m/s (a stop needed {self.needed:.1f} m/s^2)")
+        return (f"{how}; over its last {RED_APPROACH_M:.0f} m it braked at most {self.braked:.1f} m/s^2 and "
+                f"entered at {self.entry_speed:.1f} m/s")
+
+
+def red_approach(trace, f: int) -> RedApproach | None:
+    """The approach to the light the ego entered on red at frame ``f`` (see :class:`RedApproach`); None when
+    the frame before shows no light ahead."""
+    state, dist, speed = trace["tls_state"], trace["tls_dist"], trace["speed"]
+    last = f - 1
+    if last < 0 or str(state[last]) not in RED or not math.isfinite(float(dist[last])):
+        return None
+    stop_or_yellow = RED | {"y", "Y"}
+    k = last
+    # back while the light ahead shows yellow or a stop state and is the same light (its distance grows backwards)
+    while k > 0 and str(state[k - 1]) in stop_or_yellow and math.isfinite(float(dist[k - 1])) \
+            and float(dist[k - 1]) >= float(dist[k]) - 0.01:
+        k -= 1
+    from_start = k == 0 or not math.isfinite(float(dist[k - 1])) or str(state[k - 1]) in stop_or_yellow
+    d0, v0 = float(dist[k]), float(speed[k])
+    near = k
+    while near < last and float(dist[near]) > RED_APPROACH_M:
+        near += 1
+    dv = np.diff(speed[near:f + 1]) / trace.step_length
+    braked = float(max(-dv.min(), 0.0)) if len(dv) else 0.0
+    return RedApproach(k, str(state[k]), d0, v0, v0 * v0 / (2.0 * max(d0, 0.1)), braked, float(speed[f]),
+                       from_start)
+
+
 def lane_changed(trace, f: int, seconds: float = LANE_CHANGE_WINDOW) -> bool:
     """The ego moved between lanes of one normal edge within ``seconds`` before ``f``."""
     lanes = [str(l) for l in trace["lane"][frames_before(trace, f, seconds)] if l and not str(l).startswith(":")]
