@@ -972,6 +972,8 @@ def test_a_red_light_run_is_described_by_its_approach():
     assert app.from_start and app.onset == 0 and app.distance == pytest.approx(60.0)
     assert app.describe().startswith("the light was red all along from 60.0 m out; over its last 40 m it braked at "
                                      "most 2.0 m/s^2 and entered at ")
+    trace, f = _to_a_light([(1000.0, "y"), (35.0, "r")])  # yellow when it came into the trace
+    assert red_approach(trace, f).describe().startswith("the light was yellow, then red, all along from 60.0 m out")
     trace, f = _to_a_light([(1000.0, "G")])  # entered on green: nothing to describe
     assert red_approach(trace, f) is None
 

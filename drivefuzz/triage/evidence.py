@@ -161,7 +161,8 @@ class RedApproach:
 
     def describe(self) -> str:
         if self.from_start:
-            how = f"the light was red all along from {self.distance:.1f} m out"
+            shown = "yellow, then red," if self.state in "yY" else "red"
+            how = f"the light was {shown} all along from {self.distance:.1f} m out"
         else:
             how = (f"the light turned {'yellow' if self.state in 'yY' else 'red'} {self.distance:.1f} m out at "
                    f"{self.speed:.1f} m/s (a stop needed {self.needed:.1f} m/s^2)")
