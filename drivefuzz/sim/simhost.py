@@ -160,8 +160,9 @@ class SimHost:
             if p not in keep:
                 keep.append(p)
         root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # holds drivefuzz/
-        if root not in keep:
-            keep.insert(0, root)
+        if root in keep:
+            keep.remove(root)
+        keep.insert(0, root)
         return os.pathsep.join(keep)
 
     def _start(self) -> None:
