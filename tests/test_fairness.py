@@ -114,3 +114,28 @@ def test_an_obstacle_does_not_close_a_one_lane_road_of_the_route():
     parked = Actor(id="v9", kind=ActorKind.VEHICLE, nav=NavType.IMMOBILE, start_lane="WBexit_0", start_pos=60.0,
                    speed=0.0)
     assert "one lane" in unfair(mut, sc, parked)
+
+
+def test_an_actor_there_from_the_start_leaves_an_ego_entering_at_speed_room_to_slow_down():
+    """Highway seed 009 enters at 26 m/s. In a campaign, a linear car 5.2 m ahead at 14.6 m/s from the first frame
+    was struck 0.55 s in: no driver could have avoided it. The same car at the ego's speed, or 120 m ahead, is fair;
+    a parked car must leave room for a full stop."""
+    from drivefuzz.scenario.roadmap import load_roadmap
+    from drivefuzz.scenario.sumofiles import read_scenario
+
+    from conftest import ROOT
+
+    sc = read_scenario(ROOT / "seeds" / "highway" / "009").model_copy(update={"actors": ()})
+    assert sc.mission.start_speed == 26.0
+    mut = Mutator(load_roadmap(sc.network_path()), MutationConfig())
+    m = sc.mission
+
+    def car(ahead, speed, nav=NavType.LINEAR):  # ``ahead`` [m] from the ego's front to the car's rear
+        return Actor(id="v9", kind=ActorKind.VEHICLE, nav=nav, start_lane=m.start_lane,
+                     start_pos=m.start_pos + ahead + 5.0, speed=speed,
+                     dest_edge=None if nav is NavType.IMMOBILE else m.goal_edge)
+
+    assert "enters 11.4 m/s faster" in unfair(mut, sc, car(5.2, 14.6))
+    assert unfair(mut, sc, car(5.2, 26.0)) is None
+    assert unfair(mut, sc, car(120.0, 14.6)) is None
+    assert "enters 26.0 m/s faster" in unfair(mut, sc, car(60.0, 0.0, NavType.IMMOBILE))

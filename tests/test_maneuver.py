@@ -243,3 +243,24 @@ def test_a_finding_folder_names_its_crash_type(tmp_path):
     assert verdict["crash_type"] == "rear_end_braking"
     (row,) = finding_rows(tmp_path, incidents=filed.rel.startswith("incidents"))
     assert row.crash_type == "rear_end_braking"
+
+
+def test_a_car_that_enters_late_behind_a_fast_ego_is_removed(tmp_path):
+    """A campaign's incident, kept as data (tests/data/late_entry_behind): highway seed 009's ego enters at 26 m/s;
+    the linear car v4, placed 5 m ahead of it at the start at 25.9 m/s, could not be inserted there until 0.7 s
+    later, when its spot was 1.2 m behind the ego, and struck the braking ego's rear at 3.6 m/s faster. The
+    mutator's fairness rules placed it for its departure, not for where it entered: it is removed as it enters,
+    and the run is clean."""
+    import shutil
+
+    from drivefuzz.oracle import OracleSettings
+
+    folder = tmp_path / "case"
+    shutil.copytree(ROOT / "tests" / "data" / "late_entry_behind", folder)
+    shutil.copy(NET, folder / NET.name)
+    sc = load_scenario(folder)
+    assert {a.id: a.depart for a in sc.actors}["v4"] == 0.0
+    ex = execute(sc, oracles=OracleSettings().instantiate())
+    assert ex.misbehaviors == () and ex.termination.value == "goal_reached"
+    assert "v4" not in ex.trace.actors.ids
+    assert {"v0", "v1", "v2", "v3"} <= set(ex.trace.actors.ids)

@@ -7,7 +7,8 @@ no driver could get out of. After every placement, position, timing or speed cha
   for a stopped ego from its speed at ``NPC_DECEL``, with ``MARGIN`` to spare; a *linear* vehicle (which
   ignores everyone) is never placed behind the ego at all;
 - **no pop-ups**: an actor that departs later must not appear inside the ego's stopping distance ahead of
-  where the ego is expected to be by then (or inside a follower's stopping distance behind it);
+  where the ego is expected to be by then (or inside a follower's stopping distance behind it); where the
+  ego enters at speed, an actor there from the start must leave it room to shed the speed difference;
 - **walkers step out in time**: a jaywalker must reach the ego's path either after the ego has passed or
   while the ego can still stop before it (careful braking ``EGO_DECEL`` after ``REACTION``);
 - **cut-ins leave room**: a maneuver program's lane change or nudge is triggered by the gap or the headway to
@@ -126,6 +127,13 @@ def unfair(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
         need = stopping_distance(shed, EGO_DECEL, REACTION) + MARGIN
         if gap_ahead < need:
             return f"appears {gap_ahead:.1f} m ahead of the ego at {actor.depart:.1f} s, it needs {need:.1f} m"
+    elif sc.mission.start_speed > 0.0:  # there from the start, ahead of an ego that enters at speed
+        ego_v = sc.mission.start_speed
+        shed = ego_v if actor.nav is NavType.IMMOBILE else max(ego_v - actor.speed, 0.0)
+        need = stopping_distance(shed, EGO_DECEL, REACTION) + MARGIN
+        if gap_ahead < need:
+            return (f"{gap_ahead:.1f} m ahead of the ego at the start, which enters {shed:.1f} m/s faster, "
+                    f"it needs {need:.1f} m")
     return None
 
 

@@ -139,7 +139,8 @@ def _sumo_args(scenario: Scenario, folder: Path, net: Path, gui: bool) -> list[s
         "--time-to-teleport", "-1",
         "--lanechange.duration", repr(LANE_CHANGE_DURATION),
         # an actor that cannot enter where and when it was placed (the spot is taken) is dropped: entering
-        # later, wherever the spot then is free, it would be a situation no fairness rule checked
+        # later, wherever the spot then is free, it would be a situation no fairness rule checked (one that
+        # enters within the delay in the ego's way is removed: ActorDriver._late_in_the_way)
         "--max-depart-delay", repr(MAX_DEPART_DELAY),
         "--collision.action", "warn", "--collision.check-junctions", "true", "--collision.mingap-factor", "0",
         "--pedestrian.model", "striping",
