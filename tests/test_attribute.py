@@ -993,10 +993,39 @@ def test_a_red_light_run_names_the_low_sun_and_the_fog():
                                  "weather": weather})
     ex = execute(sc, oracles=OracleSettings().instantiate())
     m = next(m for m in ex.misbehaviors if m.oracle == "red_light")
-    v = attribute(sc, ex.trace, m, load_roadmap(net))
+
+    def no_replay(s):  # on a dry road the rules decide a red-light run
+        raise AssertionError("a red-light run on a dry road was replayed")
+
+    v = attribute(sc, ex.trace, m, load_roadmap(net), replay=no_replay)
     assert v.fault is Fault.EGO and v.rule == "own_driving"
     assert v.reason.startswith("the ego's own driving: red_light/red: the light was red all along from ")
     assert "; a low sun ahead (altitude 5.0 deg) dazzled it from " in v.reason
     assert v.reason.endswith("; fog 90 limits the sensors to 24 m")
     assert v.evidence["dazzled"] is True and v.evidence["light_at_onset"] == "r"
     assert v.evidence["decel_max"] < 3.5 and f"entered at {m.details['speed']:.1f} m/s" in v.reason
+
+
+def test_a_red_light_run_on_ice_is_left_to_the_careful_driver(tmp_path):
+    """A campaign's finding, kept as data (tests/data/red_light_on_ice): on the intersection the ego came to a
+    red at 8 m/s, braking gently to stop at the line, and met ice (friction 0.08) 16 m out, where a stop needed
+    more than the ice gives. It entered at 1.1 m/s. The rules called it the ego's without a replay; but nobody
+    sees the ice, and the careful driver's replay runs the same red: 'other', naming the ice."""
+    from drivefuzz.oracle import OracleSettings
+
+    net = Path(NET).with_name("intersection.net.xml")
+    sc, ex = kept_case(tmp_path, "red_light_on_ice", str(net))
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.kind, m.frame) == ("red_light", "red", 348)
+    rmap = load_roadmap(net)
+    rules = attribute(sc, ex.trace, m, rmap)
+    assert rules.fault is Fault.EGO and rules.reason.endswith("; friction 0.08 under the ego from 12.0 s"), rules.reason
+
+    def run(s):
+        got = execute(s, oracles=OracleSettings().instantiate())
+        return got.misbehaviors, got.trace
+
+    v = attribute(sc, ex.trace, m, rmap, replay=run)
+    assert v.fault is Fault.OTHER, v.reason
+    assert v.reason.startswith("a careful driver could not avoid it either (red_light/red at ")
+    assert v.reason.endswith(": friction 0.08 under the ego from 12.0 s")

@@ -254,7 +254,8 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
                 cause = _slippery(trace, f)
             if cause is not None:
                 out = Attribution(out.fault, f"{out.reason}: {cause}", {**out.evidence, "cause": cause}, out.rule)
-        elif out.fault is Fault.EGO and oracle != "mission":  # the careful driver mastered the same ice: say so
+        elif out.fault is Fault.EGO and oracle not in ("mission", "red_light"):  # the careful driver mastered
+            # the same ice: say so (a red-light verdict names the ice already)
             ground = _slippery(trace, f)
             if ground is not None:
                 out = Attribution(out.fault, f"{out.reason} ({ground})", {**out.evidence, "ground": ground}, out.rule)
@@ -379,7 +380,8 @@ class _Event:
 
     def red_light(self) -> Attribution:
         """A red light binds whatever the others do: the ego's, with how it came to the light and what kept
-        it from seeing it (a low sun ahead, fog or rain), for whoever triages it."""
+        it from seeing it (a low sun ahead, fog or rain), for whoever triages it. Ice under the ego on the way
+        in leaves it to the careful driver's replay: a driver who cannot see the ice may not stop on it."""
         head = f"the ego's own driving: {self.mb.oracle}/{self.mb.kind}"
         app = red_approach(self.trace, self.f)
         if app is None:
@@ -387,8 +389,12 @@ class _Event:
         notes = [app.describe()]
         glare = _dazzled(self.scenario, self.trace, app.onset, self.f)
         sight = _short_sight(self.scenario)
-        notes += [n for n in (glare, sight) if n]
-        return self.ego("own_driving", f"{head}: {'; '.join(notes)}", decided=True,
+        # on ice met on the way in, a stop at the line may have been beyond any driver who cannot see the ice:
+        # the careful driver's replay decides
+        t = self.trace["t"]
+        ice = _slippery(self.trace, self.f, window_s=max(6.0, float(t[self.f] - t[app.onset])))
+        notes += [n for n in (glare, sight, ice) if n]
+        return self.ego("own_driving", f"{head}: {'; '.join(notes)}", decided=ice is None,
                         light_onset_frame=app.onset, light_at_onset=app.state,
                         distance_at_onset=round(app.distance, 2), speed_at_onset=round(app.speed, 2),
                         decel_needed=round(app.needed, 2), decel_max=round(app.braked, 2), dazzled=glare is not None)
