@@ -46,10 +46,11 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   :mod:`ego.careful`). If it fails the same way (same oracle, same other party), the situation
   was unavoidable: ``other``. Not after a rule that found the ego's own fault (it entered on red;
   it stayed behind a stationary body with a lane free): the careful driver would share the one
-  (it does not overtake either) and never meet the other. Lane keeping is replayed only on ice or in a
-  strong crosswind (the careful driver tracks its path as the reference does), and a mission time-out only
-  when the ego kept moving (fog, rain and ice slow a careful driver too, and a time limit too short for
-  the route holds for everyone); such an ``other`` verdict names the ice, the wind or the fog. An ``ego``
+  (it does not overtake either) and never meet the other. A red light run is the ego's without a replay,
+  unless it met ice on the way in (the careful driver may not stop on it either). Lane keeping is replayed
+  only on ice or in a strong crosswind (the careful driver tracks its path as the reference does), and a
+  mission time-out only when the ego kept moving (fog, rain and ice slow a careful driver too, and a time
+  limit too short for the route holds for everyone); such an ``other`` verdict names the ice, the wind or the fog. An ``ego``
   verdict that the careful driver avoided on the same ice names the ice too (neither driver senses friction:
   the careful one got through by braking earlier and keeping further back).
 
