@@ -50,9 +50,9 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   unless it met ice on the way in (the careful driver may not stop on it either). Lane keeping is replayed
   only on ice or in a strong crosswind (the careful driver tracks its path as the reference does), and a
   mission time-out only when the ego kept moving (fog, rain and ice slow a careful driver too, and a time
-  limit too short for the route holds for everyone); such an ``other`` verdict names the ice, the wind or the fog. An ``ego``
-  verdict that the careful driver avoided on the same ice names the ice too (neither driver senses friction:
-  the careful one got through by braking earlier and keeping further back).
+  limit too short for the route holds for everyone); such an ``other`` verdict names the ice, the wind or
+  the fog. An ``ego`` verdict that the careful driver avoided on the same ice names the ice too (neither
+  driver senses friction: the careful one got through by braking earlier and keeping further back).
 
 Otherwise the verdict is ``ego`` with what the ego did; ``unclear`` when the trace lacks the
 evidence (the other party is not in it, the frame is outside it).
