@@ -195,7 +195,9 @@ def test_ctrl_c_to_the_whole_terminal_group_stops_jobs_2_cleanly(tmp_path, town_
     out = tmp_path / "out"
     cli = subprocess.Popen([sys.executable, "-m", "drivefuzz.cli", "fuzz", str(TOWN), "--seeds", str(seeds),
                             "-o", str(out), "--jobs", "2", "--cycles", "30", "--population", "3",
-                            "--continue-after-finding", "--ads-option", "fault=speeding"],
+                            # a budget: without one each seed runs one lineage, which may end (and the campaign
+                            # with it, nothing left to resume) before the Ctrl-C lands
+                            "--budget", "10m", "--continue-after-finding", "--ads-option", "fault=speeding"],
                            start_new_session=True, env=_env(), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     procs.procs.append(cli)
     t_end = time.monotonic() + 120
