@@ -65,6 +65,11 @@ POP_UP_LATERAL, POP_UP_MARGIN = 2.5, 2.0
 SUMO_DECEL, SUMO_ACCEL = 4.5, 2.6
 
 
+def _room_to_shed(shed: float) -> float:
+    """[m] a careful driver needs ahead to shed ``shed`` [m/s] (react, then brake), with POP_UP_MARGIN left."""
+    return shed * CAREFUL_REACTION + shed * shed / (2.0 * CAREFUL_DECEL) + POP_UP_MARGIN
+
+
 @dataclass
 class _Program:
     """Where a maneuver actor is in its program."""
@@ -153,9 +158,7 @@ class ActorDriver:
             return False
         if gap < 0.0:
             return gap + length + 2 * ego[5] > 0.0  # beside the ego's body (behind it is no pop-up)
-        shed = max(ego[4] - a.speed, 0.0)
-        need = shed * CAREFUL_REACTION + shed * shed / (2.0 * CAREFUL_DECEL) + POP_UP_MARGIN
-        return gap < need
+        return gap < _room_to_shed(max(ego[4] - a.speed, 0.0))
 
     def _late_in_the_way(self, vid: str, a, ego) -> bool:
         """Whether a vehicle that SUMO inserted late (its spot was taken when it was due, see
@@ -171,8 +174,7 @@ class ActorDriver:
             return False
         speed = a.speed if a.nav is NavType.LINEAR else self.sim.vehicle.getSpeed(vid)
         if gap >= 0.0:
-            shed = max(ego[4] - speed, 0.0)
-            return gap < shed * CAREFUL_REACTION + shed * shed / (2.0 * CAREFUL_DECEL) + POP_UP_MARGIN
+            return gap < _room_to_shed(max(ego[4] - speed, 0.0))
         behind = -(gap + length + 2 * ego[5])  # [m] from its front bumper to the ego's rear
         closing = speed - ego[4]
         if behind < 0.0:  # beside the ego's body
