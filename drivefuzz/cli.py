@@ -279,25 +279,55 @@ def seed(network, count, out, rng_seed, no_verify, force):
     """Write COUNT seed missions for NETWORK, each verified by a dry run of the reference ADS."""
     from drivefuzz.scenario.seed import generate_seeds
     from drivefuzz.scenario.sumofiles import write_scenario
-    from drivefuzz.scenario.validate import load_network
-    from drivefuzz.sim.verify import dry_run
+    from drivefuzz.scenario.validate import load_network, require_car_roads
 
     rmap = load_network(network)
+    require_car_roads(rmap)
     out = Path(out or Path("seeds") / rmap.name)
     if out.exists() and not out.is_dir():
         raise InvalidConfig("-o", str(out), "is a file", "a new or empty folder")
     if out.is_dir() and any(out.iterdir()) and not force:
         raise InvalidConfig("-o", str(out), "folder is not empty (its seeds would be overwritten)",
                             "a new or empty folder, or --force to replace them")
+    made = not out.exists()
     _writable_dir(out, "-o")
-    seeds = generate_seeds(network, count, rng_seed, verify=None if no_verify else dry_run,
-                           log=lambda s: click.echo(f"  {s}", err=True))
+    verify = _DryRuns()
+    seeds = generate_seeds(network, count, rng_seed, verify=None if no_verify else verify,
+                           log=lambda s: click.echo(f"  {s}"))
     if not seeds:
-        raise InvalidConfig(network, None, "no mission on this network passed the dry run",
+        if made:
+            with contextlib.suppress(OSError):
+                out.rmdir()  # a refused network leaves nothing behind
+        raise InvalidConfig(network, None, f"no mission on this network passed the dry run{verify.why()}",
                             "a network with connected roads that passenger cars may drive")
     for i, sc in enumerate(seeds):
         write_scenario(sc, out / f"{i:03d}")
     click.echo(f"wrote {len(seeds)} seed(s) to {out}")
+
+
+class _DryRuns:
+    """The reference ADS's dry run of a candidate seed (:func:`drivefuzz.sim.verify.dry_run`), counting why
+    candidates were rejected, so that a network where none passes is refused in one line that says why."""
+
+    def __init__(self):
+        self.rejected: dict[str, int] = {}
+
+    def __call__(self, scenario):
+        from drivefuzz.sim.verify import dry_run
+
+        ok, why = dry_run(scenario)
+        if not ok:
+            key = why.split(" at frame ")[0].split(" (")[0]
+            self.rejected[key] = self.rejected.get(key, 0) + 1
+        return ok, why
+
+    def why(self) -> str:
+        """`` (21 candidates rejected: 15 lane_invasion/opposite_lane, 6 mission/timeout)``, or nothing."""
+        if not self.rejected:
+            return ""
+        top = sorted(self.rejected.items(), key=lambda kv: (-kv[1], kv[0]))
+        return (f" ({sum(self.rejected.values())} candidates rejected: "
+                + ", ".join(f"{n} {k}" for k, n in top[:3]) + (", ..." if len(top) > 3 else "") + ")")
 
 
 # ---------------------------------------------------------------------------- fuzz
@@ -562,8 +592,7 @@ def _seeds_for(network: str, seeds_dir: str | None, count: int = 4, seeds_root: 
     """
     from drivefuzz.scenario.seed import generate_seeds, list_seeds
     from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
-    from drivefuzz.scenario.validate import load_network
-    from drivefuzz.sim.verify import dry_run
+    from drivefuzz.scenario.validate import load_network, require_car_roads
 
     rmap = load_network(network)
     folder = _seed_folder(Path(network), rmap.name, seeds_dir, seeds_root)
@@ -583,11 +612,13 @@ def _seeds_for(network: str, seeds_dir: str | None, count: int = 4, seeds_root: 
     if other and seeds_dir:
         raise InvalidConfig("--seeds", str(folder), "holds no seeds (no NNN/scenario.json) but is not empty",
                             "a folder of seeds, or a new or empty folder to generate them into")
-    click.echo(f"no seeds in {folder}: generating and verifying {count} for {rmap.path.name}...", err=True)
-    seeds = generate_seeds(network, count, 0, verify=dry_run)
+    require_car_roads(rmap)
+    click.echo(f"no seeds in {folder}: generating and verifying {count} for {rmap.path.name}...")
+    verify = _DryRuns()
+    seeds = generate_seeds(network, count, 0, verify=verify)
     if not seeds:
-        raise InvalidConfig(network, None, "could not generate a seed mission that the reference ADS completes",
-                            "a network with connected passenger roads")
+        raise InvalidConfig(network, None, "could not generate a seed mission that the reference ADS "
+                            f"completes{verify.why()}", "a network with connected passenger roads")
     if other:  # not ours to write into: the campaign keeps them in its output directory
         click.echo(f"{folder} is not empty: the seeds are kept in the output directory only", err=True)
         return seeds

@@ -170,6 +170,12 @@ NETWORK_MUTATIONS = {  # what SUMO segfaults on, refuses, or what reached the AD
     "missing-traffic-light": lambda t: re.sub(r"<tlLogic .*?</tlLogic>", "", t, flags=re.S),
     "junction-x-nan": lambda t: re.sub(r'(<junction [^>]*?)x="[^"]*"', r'\1x="nan"', t, count=1),
     "link-index-999": lambda t: re.sub(r'linkIndex="\d+"', 'linkIndex="999"', t, count=1),
+    # SUMO runs these; drivefuzz's lane arrays and stopping arithmetic cannot (the ADS raised at reset, exit 3)
+    "lane-length-1e20": lambda t: re.sub(r'(<lane id="[^:][^>]*?)length="[^"]*"', r'\1length="1e20"', t),
+    "lane-speed-1e308": lambda t: re.sub(r'(<lane id="[^:][^>]*?)speed="[^"]*"', r'\1speed="1e308"', t),
+    # a railway: SUMO loads it, and no lane allows a passenger car
+    "no-car-roads": lambda t: re.sub(r'(<lane [^>]*?)(?:dis)?allow="[^"]*"', r'\1',
+                                     t).replace("<lane ", '<lane allow="rail" '),
 }
 
 
@@ -186,7 +192,11 @@ def _network_case(mutate, command):
 
 NETWORK_CASES = [Case(f"net-{name}-{cmd}", _network_case(fn, cmd))
                  for name, fn in NETWORK_MUTATIONS.items() for cmd in ("run", "fuzz")]
-NETWORK_CASES += [Case("net-lane-index-7-seed", _network_case(NETWORK_MUTATIONS["lane-index-7"], "seed"))]
+NETWORK_CASES += [Case(f"net-{name}-seed", _network_case(NETWORK_MUTATIONS[name], "seed"))
+                  for name in ("lane-index-7", "no-car-roads", "lane-length-1e20")]
+#: every edge a self-loop (it ends at the junction it starts from): SUMO loads it, sumolib's link index raised
+SELF_LOOPS = ("self-loops", lambda t: re.sub(r'(<edge id="[^:"][^"]*" from="([^"]*)") to="[^"]*"', r'\1 to="\2"', t))
+NETWORK_CASES += [Case(f"net-self-loops-{cmd}", _network_case(SELF_LOOPS[1], cmd)) for cmd in ("seed", "fuzz")]
 
 CONFIGS = {  # (file name, text, what the line names besides the file)
     "strategy-nope": ("c.toml", '[fuzz]\nstrategy = "nope"\n', "fuzz.strategy"),
@@ -582,3 +592,58 @@ def test_networks_that_crashed_sumo_are_one_line_in_a_process_of_their_own(tmp_p
     assert r.returncode == 2, (r.returncode, r.stderr)
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "bad.net.xml" in lines[0] and "Traceback" not in r.stderr, r.stderr
+
+
+# ----------------------------------------------------------------------------- real networks SUMO loads
+def _gzipped(tmp: Path) -> Path:
+    import gzip
+
+    net = tmp / "city.net.xml.gz"
+    with gzip.open(net, "wt") as fh:
+        fh.write(SMALL_NET.read_text())
+    return net
+
+
+def _internal_lanes_numbered_0(tmp: Path) -> Path:
+    """OSM cities: every lane of a junction's internal edge has index="0"."""
+    net = tmp / "city.net.xml"
+    text = TOWN.read_text()
+    new = re.sub(r'<edge id=":[^"]*" function="internal">.*?</edge>',
+                 lambda m: re.sub(r'index="\d+"', 'index="0"', m.group(0)), text, flags=re.S)
+    assert new.count('index="0"') > text.count('index="0"')
+    net.write_text(new)
+    return net
+
+
+def _empty_internal_lanes(tmp: Path) -> Path:
+    """A port network: a junction with incoming roads and intLanes="" (SUMO accepts the empty attribute)."""
+    net = tmp / "city.net.xml"
+    text = TOWN.read_text()
+    new = re.sub(r'(<junction id="[^:"][^"]*" type="priority"[^>]*?)intLanes="[^"]*"', r'\1intLanes=""', text)
+    assert new.count('intLanes=""') >= 1 and new != text
+    net.write_text(new)
+    return net
+
+
+REAL_NETWORKS = {"gzipped": _gzipped, "internal-lanes-numbered-0": _internal_lanes_numbered_0,
+                 "empty-intLanes": _empty_internal_lanes}
+
+
+@pytest.mark.parametrize("name", REAL_NETWORKS)
+def test_networks_that_sumo_loads_give_seeds_and_run(tmp_path, name):
+    """Issue 30: what SUMO 1.28 loads without a word, drivefuzz runs on: seeds come out, verified by the
+    reference ADS's dry run, and a campaign of a few executions runs on them to its end."""
+    net = REAL_NETWORKS[name](tmp_path)
+    r = invoke(["seed", net, "-n", "2", "-o", tmp_path / "seeds"], cwd=tmp_path)
+    assert r.exit_code == 0 and "Traceback" not in r.output, r.output
+    assert len(list((tmp_path / "seeds").glob("*/scenario.json"))) == 2
+    r = invoke(["fuzz", net, "--seeds", tmp_path / "seeds", "--max-execs", "3", "-o", tmp_path / "o"], cwd=tmp_path)
+    assert r.exit_code in (0, 1) and "Traceback" not in r.output, r.output
+    assert "3 executions" in r.stdout, r.stdout
+
+
+def test_a_network_without_car_roads_is_refused_for_what_it_is(tmp_path):
+    """A railway is not a network 'where no mission passed the dry run': it has no road for the ego at all."""
+    net = bad_network(tmp_path, NETWORK_MUTATIONS["no-car-roads"])
+    line = assert_one_line(invoke(["seed", net, "-n", "1", "-o", tmp_path / "s"], cwd=tmp_path), "bad.net.xml")
+    assert "no road a passenger car may use" in line and "rail" in line, line

@@ -142,6 +142,25 @@ class SeedJob:
     def _checkpoint(self, schedule, baseline: dict[str, Any] | None) -> None:
         atomic_write_json(self.dir / "checkpoint.json", {"schedule": schedule.to_json(), "baseline": baseline})
 
+    def _read_checkpoint(self, schedule_cls) -> tuple[dict[str, Any], Any]:
+        """(checkpoint, schedule) as the last run left them; empty and a new schedule when there is none.
+
+        The journal is what a resume trusts: the checkpoint only saves the replay of the journal's records.
+        Every execution's key and every random draw are keyed on the campaign seed and the scenario's content,
+        so a new schedule walks the same lineages again, taking each result from the journal without running
+        it. A damaged checkpoint (empty, truncated, not ours) is therefore set aside, not fatal."""
+        path = self.dir / "checkpoint.json"
+        if path.exists():
+            try:
+                ckpt = json.loads(path.read_text())
+                if not isinstance(ckpt, dict):
+                    raise ValueError("not a JSON object")
+                return ckpt, schedule_cls.from_json(self.cfg.schedule, ckpt.get("schedule"), self.cfg.feedback)
+            except (ValueError, TypeError, KeyError, AttributeError, IndexError, OSError, RecursionError) as exc:
+                _append(self.journal, {"event": "checkpoint-rebuilt", "why": f"{type(exc).__name__}: {exc}"[:300],
+                                       "pid": os.getpid()})
+        return {}, schedule_cls.from_json(self.cfg.schedule, None, self.cfg.feedback)
+
     # ------------------------------------------------------------------ run
     def run(self, stop: Callable[[], bool] | None = None,
             on_record: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
@@ -189,9 +208,7 @@ class SeedJob:
             seed_sc = seed_sc.model_copy(update={"sim": seed_sc.sim.model_copy(update={"time_limit": cfg.time_limit})})
         seed_sc = seed_sc.model_copy(update={"ads": cfg.ads})
         mutator = Mutator(load_roadmap(seed_sc.network_path()), cfg.mutation)
-        ckpt_path = self.dir / "checkpoint.json"
-        ckpt = json.loads(ckpt_path.read_text()) if ckpt_path.exists() else {}
-        schedule = Schedule.from_json(cfg.schedule, ckpt.get("schedule"), cfg.feedback)
+        ckpt, schedule = self._read_checkpoint(Schedule)
         runner = _Runner(cfg)
         if runner.host is not None:
             _warm_up()

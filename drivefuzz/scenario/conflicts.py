@@ -30,7 +30,6 @@ Nothing here imports libsumo.
 
 from __future__ import annotations
 
-import gzip
 import random
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
@@ -38,7 +37,7 @@ from enum import Enum
 from typing import Iterator
 
 from drivefuzz.scenario import AdsSpec, Mission, Scenario, SimOptions
-from drivefuzz.scenario.roadmap import PASSENGER, RoadMap
+from drivefuzz.scenario.roadmap import PASSENGER, RoadMap, open_network
 from drivefuzz.scenario.seed import MAX_ROUTE_M, MIN_EDGE_M, MIN_ROUTE_M, doubles_back, time_limit_for
 
 #: Distance [m] of the ego's start before the stop line it must reach at speed.
@@ -128,9 +127,8 @@ def _read_logic(path: str) -> tuple[dict[str, tuple[dict[int, str], dict[int, st
     """(junction id -> (response, foes) per link index, tls id -> phase strings) from the net file."""
     requests: dict[str, tuple[dict[int, str], dict[int, str]]] = {}
     phases: dict[str, list[str]] = {}
-    opener = gzip.open if path.endswith(".gz") else open
     junction = None
-    with opener(path, "rb") as source:
+    with open_network(path) as source:
         for ev, el in ET.iterparse(source, events=("start", "end")):
             if ev == "start":
                 if el.tag == "junction":
@@ -173,6 +171,16 @@ def _passage(rmap: RoadMap, via: str) -> tuple[str, ...]:
     return tuple(chain)
 
 
+def _junction_index(conn) -> int:
+    """The connection's index in its junction's request list, or -1 where sumolib cannot tell: its
+    ``getLinkIndex`` raises IndexError for a lane listed in ``incLanes`` whose edge does not end at the
+    junction (a network of self-loops, which SUMO loads)."""
+    try:
+        return conn.getJunctionIndex()
+    except (IndexError, ValueError, KeyError):
+        return -1
+
+
 def _links(rmap: RoadMap, node) -> dict[int, _Link]:
     """The vehicle links (normal edge to normal edge) and crossings of ``node``, by request index."""
     out: dict[int, _Link] = {}
@@ -183,7 +191,7 @@ def _links(rmap: RoadMap, node) -> dict[int, _Link]:
             for conn in lane.getOutgoing():
                 if conn.getTo().getFunction() != "":
                     continue
-                i = conn.getJunctionIndex()
+                i = _junction_index(conn)
                 if i < 0:
                     continue
                 via = conn.getViaLaneID() or ""
@@ -191,6 +199,8 @@ def _links(rmap: RoadMap, node) -> dict[int, _Link]:
                                conn.getDirection(), conn.getState(), conn.getTLLinkIndex() if conn.getTLSID() else -1,
                                False)
     for i, lane_id in enumerate(node.getInternal()):
+        if not lane_id or not rmap.has_lane(lane_id):  # intLanes="" (SUMO accepts it): sumolib reads ['']
+            continue
         lane = rmap.lane(lane_id)
         if lane.getEdge().getFunction() != "crossing":
             continue

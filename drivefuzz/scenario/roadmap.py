@@ -26,6 +26,31 @@ from drivefuzz.errors import InvalidNetwork
 PASSENGER = "passenger"
 PEDESTRIAN = "pedestrian"
 
+#: the endings of a network file's name, longest first (SUMO reads a gzipped network as it is)
+NET_SUFFIXES = (".net.xml.gz", ".net.xml", ".xml.gz", ".gz")
+
+
+def open_network(path: str | os.PathLike):
+    """The network file ``path`` opened for reading bytes, the way SUMO reads it: gzipped or not, told by
+    its first two bytes (gzip's magic number), not by its name."""
+    source = open(path, "rb")
+    if source.read(2) == b"\x1f\x8b":
+        import gzip
+
+        source.close()
+        return gzip.open(path, "rb")
+    source.seek(0)
+    return source
+
+
+def network_name(path: str | os.PathLike) -> str:
+    """``town`` for ``networks/town.net.xml``, ``ingolstadt`` for ``ingolstadt.net.xml.gz``."""
+    n = Path(path).name
+    for suffix in NET_SUFFIXES:
+        if n.endswith(suffix) and len(n) > len(suffix):
+            return n[: -len(suffix)]
+    return Path(n).stem
+
 
 @dataclass(frozen=True)
 class LaneGeom:
@@ -137,8 +162,7 @@ class RoadMap:
     # ----------------------------------------------------------- look-ups
     @property
     def name(self) -> str:
-        n = self.path.name
-        return n[: -len(".net.xml")] if n.endswith(".net.xml") else self.path.stem
+        return network_name(self.path)
 
     def has_edge(self, edge_id: str) -> bool:
         return self.net.hasEdge(edge_id)
@@ -296,13 +320,7 @@ class RoadMap:
 def _lane_change_attributes(path: str) -> dict[str, tuple[str | None, str | None]]:
     """lane id -> (changeLeft, changeRight) for the lanes of ``path`` that set either."""
     out: dict[str, tuple[str | None, str | None]] = {}
-    if path.endswith(".gz"):
-        import gzip
-
-        source = gzip.open(path, "rb")
-    else:
-        source = open(path, "rb")
-    with source:
+    with open_network(path) as source:
         _scan_lanes(source, out)
     return out
 

@@ -16,6 +16,8 @@ import functools
 import xml.etree.ElementTree as ET
 from typing import NamedTuple
 
+from drivefuzz.scenario.roadmap import open_network
+
 #: [s] below SUMO's millisecond clock: moves a time on a phase boundary into the phase that ends there
 _EPS = 1e-6
 #: programID of a shifted copy of a network's program in a scenario's additional file
@@ -36,8 +38,13 @@ class Program(NamedTuple):
 @functools.lru_cache(maxsize=16)
 def programs(net_path: str) -> dict[str, Program]:
     """tls id -> the first program of the network file ``net_path``."""
+    with open_network(net_path) as source:
+        return _read_programs(source)
+
+
+def _read_programs(source) -> dict[str, Program]:
     out: dict[str, Program] = {}
-    for _ev, el in ET.iterparse(net_path, events=("end",)):
+    for _ev, el in ET.iterparse(source, events=("end",)):
         if el.tag == "tlLogic":
             tid = el.get("id", "")
             if tid not in out:

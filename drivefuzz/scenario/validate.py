@@ -20,7 +20,7 @@ from pathlib import Path
 from shapely.geometry import LineString, Polygon
 
 from drivefuzz.errors import InvalidNetwork, InvalidScenario
-from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN, RoadMap, load_roadmap
+from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN, RoadMap, load_roadmap, open_network
 from drivefuzz.scenario.signals import shiftable
 from drivefuzz.scenario import ActorKind, Puddle, Scenario, lane_edge
 
@@ -37,6 +37,8 @@ def _check_lane(rmap: RoadMap, src: str, field: str, lane_id: str, pos: float, v
     lane = rmap.lane(lane_id)
     if not lane.allows(vclass):
         pool = rmap.lanes(vclass) if vclass == PASSENGER else rmap.walkable_lanes()
+        if not pool and vclass == PASSENGER:
+            require_car_roads(rmap)  # the network is the mistake, not the lane: say so
         raise InvalidScenario(src, field, f"{what} placed on lane {lane_id!r}, which does not allow {vclass}s "
                               f"(off the road{' or off any walkable lane' if vclass == PEDESTRIAN else ''})",
                               f"a lane allowing {vclass}s, such as {_examples(pool)}")
@@ -127,6 +129,25 @@ def _bounds(rmap: RoadMap) -> tuple[float, float, float, float]:
     return x0 - BOUNDS_MARGIN, y0 - BOUNDS_MARGIN, x1 + BOUNDS_MARGIN, y1 + BOUNDS_MARGIN
 
 
+def require_car_roads(rmap: RoadMap) -> None:
+    """Raise InvalidNetwork when no lane of a normal edge allows a passenger car (a railway, a waterway, a
+    racing circuit for race cars): the ego has nowhere to drive. SUMO loads such networks; drivefuzz cannot
+    fuzz a car on them, and says so before it tries a single mission."""
+    if rmap.lanes(PASSENGER):
+        return
+    classes: dict[str, int] = {}
+    for e in rmap.net.getEdges(withInternal=False):
+        for lane in e.getLanes():
+            for vc in sorted(lane._allowed) if getattr(lane, "_allowed", None) else ():
+                classes[vc] = classes.get(vc, 0) + 1
+    seen = sorted(classes, key=lambda c: (-classes[c], c))
+    raise InvalidNetwork(str(rmap.path), None, "no road a passenger car may use: no lane of its "
+                         f"{len(rmap.net.getEdges(withInternal=False))} edges allows the class 'passenger'"
+                         + (f" (its lanes allow {_examples(seen, 5)})" if seen else ""),
+                         "a network with lanes that allow passenger cars (netconvert: allow=\"passenger\" or no "
+                         "allow/disallow at all)")
+
+
 def load_network(path: str | os.PathLike) -> RoadMap:
     """The network at ``path`` as a RoadMap, after :func:`check_network`."""
     rmap = load_roadmap(path)
@@ -200,87 +221,114 @@ def _shape_ok(text: str | None) -> bool:
 
 
 def _check_network_xml(path: Path) -> None:
-    src = str(path)
-
-    def bad(field: str, problem: str, valid: str | None = None):
-        return InvalidNetwork(src, field, problem, valid)
-
-    junctions: set[str] = set()
-    edges: dict[str, tuple[str | None, str | None]] = {}  # id -> (from, to) of normal edges
-    current = ["", 0]  # the edge being read, and how many lanes it has had
-    tls: dict[str, int] = {}  # tlLogic id -> signals in its shortest phase
-    rail: set[str] = set()  # rail signals and crossings
-    links: list[tuple[str, int, str]] = []  # (tl, linkIndex, connection)
-    root_seen = False
+    scan = _NetScan(str(path))
     try:
-        for event, el in ET.iterparse(path, events=("start", "end")):
-            if event == "start":
-                if not root_seen:
-                    root_seen = True
-                    if el.tag != "net":
-                        raise bad(f"<{el.tag}>", "the root element is not <net>", "a .net.xml written by netconvert")
-                if el.tag == "edge":
-                    current[:] = [el.get("id", ""), 0]
-                continue
-            tag = el.tag
-            if tag == "lane":
-                _check_lane_el(el, current, bad)
-            elif tag == "edge":
-                eid = el.get("id", "")
-                if el.get("function") not in ("internal", "walkingarea", "crossing"):
-                    edges[eid] = (el.get("from"), el.get("to"))
-            elif tag == "junction":
-                jid = el.get("id", "")
-                junctions.add(jid)
-                if el.get("type") in RAIL_SIGNALS:  # SUMO builds their signals itself: no <tlLogic>
-                    rail.add(jid)
-                for name in ("x", "y"):
-                    if not _finite(el.get(name)):
-                        raise bad(f"junction[{jid}].{name}", f"{el.get(name)!r} is not a finite number")
-                if not _shape_ok(el.get("shape")):
-                    raise bad(f"junction[{jid}].shape", "not a list of finite x,y points")
-            elif tag == "tlLogic":
-                tid = el.get("id", "")
-                states = [ph.get("state", "") for ph in el.findall("phase")]
-                if not states:
-                    raise bad(f"tlLogic[{tid}]", "has no phases", "<phase duration=... state=.../>")
-                for ph in el.findall("phase"):
-                    d = ph.get("duration")
-                    if not _finite(d) or float(d) <= 0:
-                        raise bad(f"tlLogic[{tid}].phase.duration", f"{d!r} is not a positive number of seconds")
-                    if not set(ph.get("state", "")) <= _SIGNALS or len(ph.get("state", "")) != len(states[0]):
-                        raise bad(f"tlLogic[{tid}].phase.state", f"{ph.get('state')!r} is not a signal state "
-                                  "as long as the others", "characters of rRyYgGsuoO")
-                tls[tid] = len(states[0])
-            elif tag == "connection" and el.get("tl") is not None:
-                name = f"connection[{el.get('from')}->{el.get('to')}]"
-                try:
-                    links.append((el.get("tl"), int(el.get("linkIndex", "")), name))
-                except ValueError:
-                    raise bad(f"{name}.linkIndex", f"{el.get('linkIndex')!r} is not an integer") from None
-            elif tag == "location":
-                for name in ("netOffset", "convBoundary"):
-                    if el.get(name) is not None and not all(_finite(v) for v in el.get(name).split(",")):
-                        raise bad(f"location.{name}", f"{el.get(name)!r} is not a list of finite numbers")
-            if tag in ("edge", "junction", "tlLogic", "connection"):
-                el.clear()
-    except ET.ParseError as exc:
-        raise bad(None, f"malformed XML ({exc})", "a .net.xml written by netconvert") from None
+        with open_network(path) as source:
+            for event, el in ET.iterparse(source, events=("start", "end")):
+                if event == "start":
+                    scan.start(el)
+                else:
+                    scan.end(el)
+    except (ET.ParseError, EOFError, OSError) as exc:  # EOFError, OSError: a damaged gzip stream
+        raise scan.bad(None, f"malformed XML ({exc})", "a .net.xml written by netconvert") from None
     except RecursionError:
-        raise bad(None, "nested too deeply", "a .net.xml written by netconvert") from None
-    for eid, (a, b) in edges.items():
-        for end, node in (("from", a), ("to", b)):
-            if node is not None and node not in junctions:
-                raise bad(f"edge[{eid}].{end}", f"unknown junction {node!r}", "the id of a <junction>")
-    for tl, index, name in links:
-        if index == -1 or (tl in rail and tl not in tls):  # not controlled (OSM cities), or a rail signal
-            continue
-        if tl not in tls:
-            raise bad(f"{name}.tl", f"unknown traffic light {tl!r}", "the id of a <tlLogic>")
-        if not 0 <= index < tls[tl]:
-            raise bad(f"{name}.linkIndex", f"{index} is not a signal of traffic light {tl!r}",
-                      f"0 to {tls[tl] - 1}")
+        raise scan.bad(None, "nested too deeply", "a .net.xml written by netconvert") from None
+    scan.check_references()
 
+
+class _NetScan:
+    """What :func:`_check_network_xml` learns in one pass over the XML, and the checks of each element."""
+
+    def __init__(self, src: str):
+        self.src = src
+        self.root_seen = False
+        self.junctions: set[str] = set()
+        self.edges: dict[str, tuple[str | None, str | None]] = {}  # id -> (from, to) of normal edges
+        self.current = ["", 0, False]  # the edge being read, how many lanes it has had, whether it is normal
+        self.tls: dict[str, int] = {}  # tlLogic id -> signals in its shortest phase
+        self.rail: set[str] = set()  # rail signals and crossings
+        self.links: list[tuple[str, int, str]] = []  # (tl, linkIndex, connection)
+
+    def bad(self, field: str | None, problem: str, valid: str | None = None) -> InvalidNetwork:
+        return InvalidNetwork(self.src, field, problem, valid)
+
+    def start(self, el: ET.Element) -> None:
+        if not self.root_seen:
+            self.root_seen = True
+            if el.tag != "net":
+                raise self.bad(f"<{el.tag}>", "the root element is not <net>", "a .net.xml written by netconvert")
+        if el.tag == "edge":
+            self.current[:] = [el.get("id", ""), 0, el.get("function") in (None, "normal")]
+
+    def end(self, el: ET.Element) -> None:
+        tag = el.tag
+        if tag == "lane":
+            _check_lane_el(el, self.current, self.bad)
+        elif tag == "edge":
+            if el.get("function") not in ("internal", "walkingarea", "crossing"):
+                self.edges[el.get("id", "")] = (el.get("from"), el.get("to"))
+        elif tag == "junction":
+            self._junction(el)
+        elif tag == "tlLogic":
+            self._tl_logic(el)
+        elif tag == "connection" and el.get("tl") is not None:
+            name = f"connection[{el.get('from')}->{el.get('to')}]"
+            try:
+                self.links.append((el.get("tl"), int(el.get("linkIndex", "")), name))
+            except ValueError:
+                raise self.bad(f"{name}.linkIndex", f"{el.get('linkIndex')!r} is not an integer") from None
+        elif tag == "location":
+            for name in ("netOffset", "convBoundary"):
+                if el.get(name) is not None and not all(_finite(v) for v in el.get(name).split(",")):
+                    raise self.bad(f"location.{name}", f"{el.get(name)!r} is not a list of finite numbers")
+        if tag in ("edge", "junction", "tlLogic", "connection"):
+            el.clear()
+
+    def _junction(self, el: ET.Element) -> None:
+        jid = el.get("id", "")
+        self.junctions.add(jid)
+        if el.get("type") in RAIL_SIGNALS:  # SUMO builds their signals itself: no <tlLogic>
+            self.rail.add(jid)
+        for name in ("x", "y"):
+            if not _finite(el.get(name)):
+                raise self.bad(f"junction[{jid}].{name}", f"{el.get(name)!r} is not a finite number")
+        if not _shape_ok(el.get("shape")):
+            raise self.bad(f"junction[{jid}].shape", "not a list of finite x,y points")
+
+    def _tl_logic(self, el: ET.Element) -> None:
+        tid = el.get("id", "")
+        states = [ph.get("state", "") for ph in el.findall("phase")]
+        if not states:
+            raise self.bad(f"tlLogic[{tid}]", "has no phases", "<phase duration=... state=.../>")
+        for ph in el.findall("phase"):
+            d = ph.get("duration")
+            if not _finite(d) or float(d) <= 0:
+                raise self.bad(f"tlLogic[{tid}].phase.duration", f"{d!r} is not a positive number of seconds")
+            if not set(ph.get("state", "")) <= _SIGNALS or len(ph.get("state", "")) != len(states[0]):
+                raise self.bad(f"tlLogic[{tid}].phase.state", f"{ph.get('state')!r} is not a signal state "
+                               "as long as the others", "characters of rRyYgGsuoO")
+        self.tls[tid] = len(states[0])
+
+    def check_references(self) -> None:
+        for eid, (a, b) in self.edges.items():
+            for end, node in (("from", a), ("to", b)):
+                if node is not None and node not in self.junctions:
+                    raise self.bad(f"edge[{eid}].{end}", f"unknown junction {node!r}", "the id of a <junction>")
+        for tl, index, name in self.links:
+            if index == -1 or (tl in self.rail and tl not in self.tls):  # not controlled (OSM), or a rail signal
+                continue
+            if tl not in self.tls:
+                raise self.bad(f"{name}.tl", f"unknown traffic light {tl!r}", "the id of a <tlLogic>")
+            if not 0 <= index < self.tls[tl]:
+                raise self.bad(f"{name}.linkIndex", f"{index} is not a signal of traffic light {tl!r}",
+                               f"0 to {self.tls[tl] - 1}")
+
+
+#: [m] the longest lane drivefuzz models (SUMO takes any finite length; the longest edges of real motorway
+#: networks are some tens of kilometres; a lane of 1e20 m made the reference ADS's lane arrays overflow)
+MAX_LANE_LENGTH = 100_000.0
+#: [m/s] the highest lane speed limit drivefuzz models (3,600 km/h: no real road comes near it)
+MAX_LANE_SPEED = 1_000.0
 
 #: junction types whose signals SUMO builds without a <tlLogic> (connections still name them in ``tl``)
 RAIL_SIGNALS = ("rail_signal", "rail_crossing")
@@ -289,15 +337,22 @@ RAIL_SIGNALS = ("rail_signal", "rail_crossing")
 def _check_lane_el(el: ET.Element, current: list, bad) -> None:
     lid = el.get("id", "")
     expected = current[1]
-    if el.get("index") != str(expected):
+    # SUMO segfaults while vehicles drive on a normal edge whose lanes are misnumbered (measured on 1.28), but
+    # loads and runs internal edges numbered anyhow (OSM cities number every junction lane 0): only normal
+    # edges are checked
+    if current[2] and el.get("index") != str(expected):
         raise bad(f"lane[{lid}].index", f"{el.get('index')!r} out of order on edge {current[0]!r}",
                   f"{expected} (an edge's lanes are numbered from 0)")
     current[1] = expected + 1
-    for name in ("speed", "length"):
+    for name, most in (("speed", MAX_LANE_SPEED), ("length", MAX_LANE_LENGTH)):
         v = el.get(name)
         if not _finite(v) or float(v) < 0 or (name == "speed" and float(v) == 0):
             raise bad(f"lane[{lid}].{name}", f"{v!r} is not a {'positive' if name == 'speed' else 'non-negative'} "
                       "finite number")
+        if float(v) > most:
+            raise bad(f"lane[{lid}].{name}", f"{v} {'m/s' if name == 'speed' else 'm'} is beyond what drivefuzz "
+                      "can model (the ADS's and the oracles' lane arrays and stopping arithmetic)",
+                      f"{'0' if name == 'length' else 'above 0'} to {most:g} {'m/s' if name == 'speed' else 'm'}")
     if el.get("width") is not None and (not _finite(el.get("width")) or float(el.get("width")) <= 0):
         raise bad(f"lane[{lid}].width", f"{el.get('width')!r} is not a positive finite number")
     if not _shape_ok(el.get("shape")):
