@@ -16,21 +16,39 @@ perception keeps and the control the reference chose), so it follows the referen
   within 60 % of what it sees; it aims at a lower fraction of the speed limit;
 - a low sun ahead does not blind it to the traffic lights: a driver shades the eyes and reads the light,
   where the reference's camera sees none and holds the last state it saw (a red can then hold it for
-  good at a green light).
+  good at a green light);
+- it yields to walkers by their predicted line, not their place: a walker it tracks is extrapolated in a
+  straight line at its speed over the car's comfortable stopping time plus a second (at least
+  :data:`HORIZON`, at most :data:`WALKER_HORIZON` s); where that line crosses its path corridor before the
+  car's rear could have cleared it, the car stops :data:`WALKER_MARGIN` short of the crossing, so it never
+  stands inside a walker's predicted path (the reference stops a gap short of where the walker is, which a
+  walker crossing at an angle walks into);
+- it slows for low friction it knows: the road's wetness (it sees rain and a wet road), and the puddles of the
+  map (option ``puddles``, which the attribution's replay fills from the scenario: the benchmark of what could
+  have been done, as a local driver knows an icy bend): on ground of friction ``mu`` it drives no faster than
+  it can stop from at half its grip within :data:`GRIP_SIGHT` m, braking at :data:`FREE_DECEL_CAREFUL` before
+  the patch, and counts on ``0.8 mu g`` (at most :data:`PLANNING_DECEL`) for its stopping distance.
+
+What it cannot see: what its sensors miss (range, field of view, fog, occlusion: the reference's sensing); a
+walker's or driver's intent (it extrapolates the present heading and speed: a walker who turns, or a car that
+will brake, surprises it as it would a human); friction it is not told of (a puddle absent from its option).
+Cyclists are not modelled by drivefuzz (actors are vehicles or pedestrians); a slow vehicle is treated as one.
 
 Units: SI, radians ENU.
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import replace
 
 from drivefuzz.ads import Control, Observation
+from drivefuzz.sim.world import surface_friction
 
 from ego.ads import ReferenceADS
 from ego.perception import HEADING, LENGTH, PED, SPEED, WIDTH, X, Y
-from ego.planning import idm_accel
+from ego.planning import idm_accel, profile_accel, stop_accel
 
 #: [s] how far ahead pedestrians and moving vehicles are predicted.
 HORIZON = 3.0
@@ -44,6 +62,20 @@ PLANNING_DECEL = 6.0
 VISIBILITY_DECEL = 3.0
 #: ... within this share of its (shortened) sensor range.
 SIGHT_SHARE = 0.6
+#: [s] the longest a walker's straight line is extrapolated.
+WALKER_HORIZON = 6.0
+#: [s] step of that extrapolation.
+WALKER_STEP = 0.25
+#: [m] it stops this far (front bumper) short of where a walker's predicted line enters its path corridor.
+WALKER_MARGIN = 1.5
+#: [m] half-width of the corridor a walker's predicted line must keep out of: half the car and a margin.
+WALKER_CORRIDOR = 1.0 + 0.9
+#: [m] on low friction it drives no faster than it can stop from, at half its grip, within this distance.
+GRIP_SIGHT = 30.0
+#: [m/s^2] how it slows before a patch of low friction.
+FREE_DECEL_CAREFUL = 2.0
+#: [m/s^2] gravity
+G = 9.81
 
 
 class CarefulADS(ReferenceADS):
@@ -54,10 +86,14 @@ class CarefulADS(ReferenceADS):
         headway: float = 2.0  # [s] time gap it keeps to vehicles in its path
         min_gap: float = 4.0  # [m] standstill gap
         margin: float = 2.0  # [m] added to its stopping distance before it brakes fully
+        #: puddles it knows of, "x,y,length,width,rotation,friction" [m, rad ENU] separated by ";" (:func:`puddle_option`)
+        puddles: str = ""
 
     def reset(self, mission, roadmap) -> None:
         super().reset(mission, roadmap)
         self._cruise = float(self.options.cruise_speed)
+        self._mu_path = _path_friction(self.path, self.options.puddles)  # per path point (None: no puddles)
+        self._grip_profile = None  # built at the first step (the road's wetness comes with the observation)
 
     def step(self, obs: Observation) -> Control:
         if obs.sun_glare:
@@ -68,6 +104,9 @@ class CarefulADS(ReferenceADS):
             return control
         v = obs.ego.speed
         accel = self._hazard_accel(obs)
+        for extra in (self._walker_accel(obs), self._grip_accel(obs)):
+            if extra is not None:
+                accel = extra if accel is None else min(accel, extra)
         if accel is None:
             return control
         if accel <= -self.params.max_brake_decel + 1e-6:
@@ -100,7 +139,7 @@ class CarefulADS(ReferenceADS):
         lo, hi = path.window(self.path_idx, 120)
         s_c = self.s_center
         half = ego.length / 2.0
-        stop = v * REACTION + v * v / (2.0 * PLANNING_DECEL) + self.options.margin
+        stop = v * REACTION + v * v / (2.0 * self._planning_decel(obs)) + self.options.margin
         best = None
         for tr in tracks:
             ped, spd = tr[PED], tr[SPEED]
@@ -129,3 +168,120 @@ class CarefulADS(ReferenceADS):
                     best = a if best is None else min(best, a)
                 break
         return best
+
+    # ------------------------------------------------------------------ walkers' predicted lines
+    def _walker_accel(self, obs: Observation) -> float | None:
+        """The acceleration [m/s^2] that stops it :data:`WALKER_MARGIN` short of where a walker's predicted line
+        enters its path corridor, for each walker whose line crosses the path before the car's rear could have
+        cleared it at its present speed (None: no walker to yield to)."""
+        tracks = [tr for tr in self.perception.tracks.values() if tr[PED] and tr[SPEED] > 0.2]
+        if not tracks:
+            return None
+        v = obs.ego.speed
+        half = obs.ego.length / 2.0
+        front, rear = self.s_center + half, self.s_center - half
+        horizon = min(max(HORIZON, REACTION + v / VISIBILITY_DECEL + 1.0), WALKER_HORIZON)
+        lo, hi = self.path.window(self.path_idx, 120)
+        best = None
+        for tr in tracks:
+            c, s_, spd = math.cos(tr[HEADING]), math.sin(tr[HEADING]), tr[SPEED]
+            s_in = s_out = t_in = None
+            h = 0.0
+            while h <= horizon + 1e-9:
+                hit = self.path.locate_near(tr[X] + spd * c * h, tr[Y] + spd * s_ * h, lo, hi)
+                if hit is not None and abs(hit[1]) <= WALKER_CORRIDOR + tr[WIDTH] / 2:
+                    s_in = hit[0] if s_in is None else min(s_in, hit[0])
+                    s_out = hit[0] if s_out is None else max(s_out, hit[0])
+                    t_in = h if t_in is None else t_in
+                h += WALKER_STEP
+            if s_in is None or s_out < rear:
+                continue  # its line keeps out of the path, or crosses it behind the car
+            if s_in - WALKER_MARGIN < front:
+                continue  # too late to stop short: the hazard rule (brake fully, or drive on) decides
+            # the car's rear clears the far side of the walker's line (and its margin) at its present speed
+            # a second before the walker gets there: no need to wait
+            if v > 0.5 and (s_out + WALKER_MARGIN - rear) / v < t_in - 1.0:
+                continue
+            a = stop_accel(v, s_in - WALKER_MARGIN - front, comfort=3.0)
+            best = a if best is None else min(best, a)
+        return best
+
+    # ------------------------------------------------------------------ low friction it knows
+    def _planning_decel(self, obs: Observation) -> float:
+        """[m/s^2] the deceleration its stopping distance counts on: :data:`PLANNING_DECEL`, or ``0.8 mu g`` on
+        the lowest friction it knows of within 40 m ahead."""
+        mu = self._known_mu(obs, 40.0)
+        return min(PLANNING_DECEL, max(0.8 * mu * G, 0.3))
+
+    def _known_mu(self, obs: Observation, ahead_m: float) -> float:
+        """The lowest friction it knows of on its path from its rear to ``ahead_m`` [m] ahead (the wet road, the
+        puddles of its option)."""
+        mu = surface_friction(obs.weather)
+        if self._mu_path is None:
+            return mu
+        s = self.path._s
+        i0 = max(self.path_idx - 5, 0)
+        i1 = min(bisect.bisect_right(s, s[self.path_idx] + ahead_m, self.path_idx), len(s) - 1)
+        return min(mu, min(self._mu_path[i0:i1 + 1]))
+
+    def _grip_accel(self, obs: Observation) -> float | None:
+        """The acceleration [m/s^2] that keeps it at or below the speed its known grip allows (None: no cap
+        binds): on friction ``mu``, ``sqrt(2 * 0.5 mu g * GRIP_SIGHT)``, reached braking gently before it."""
+        if self._grip_profile is None:
+            mu0 = surface_friction(obs.weather)
+            mus = self._mu_path if self._mu_path is not None else [mu0] * len(self.path._s)
+            self._grip_profile = _grip_profile(self.path, [min(m, mu0) for m in mus])
+        if self._grip_profile is False:
+            return None
+        v = obs.ego.speed
+        a = profile_accel(self._grip_profile, self.path, self.path_idx, v, max(v * 1.0, 4.0))
+        cap = self._grip_profile[self.path_idx]
+        if v > cap:
+            a = min(a, -FREE_DECEL_CAREFUL)
+        return None if not math.isfinite(a) else a
+
+
+def grip_speed(mu: float) -> float:
+    """[m/s] the careful driver's speed on ground of friction ``mu``: it stops from it, braking at half its grip,
+    within :data:`GRIP_SIGHT` m."""
+    return math.sqrt(2.0 * 0.5 * max(mu, 0.02) * G * GRIP_SIGHT)
+
+
+def _grip_profile(path, mus: list[float]):
+    """Per path point, the highest speed [m/s] that respects :func:`grip_speed` there and, braking at
+    :data:`FREE_DECEL_CAREFUL`, at every later point; False when nothing on the path binds below 30 m/s."""
+    caps = [grip_speed(m) for m in mus]
+    if min(caps) >= 30.0:
+        return False
+    s = path._s
+    prof = list(caps)
+    for i in range(len(prof) - 2, -1, -1):
+        prof[i] = min(caps[i], math.sqrt(prof[i + 1] ** 2 + 2.0 * FREE_DECEL_CAREFUL * (s[i + 1] - s[i])))
+    return prof
+
+
+def puddle_option(puddles) -> str:
+    """The ``puddles`` option that tells the careful driver of a scenario's puddles."""
+    return ";".join(",".join(f"{v:.6g}" for v in (p.x, p.y, p.length, p.width, p.rotation, p.friction))
+                    for p in puddles)
+
+
+def _path_friction(path, option: str) -> list[float] | None:
+    """Per path point, the lowest friction of the puddles in ``option`` (:func:`puddle_option`) under it (1.0
+    elsewhere); None without puddles."""
+    if not option.strip():
+        return None
+    items = []
+    for part in option.split(";"):
+        x, y, length, width, rot, f = (float(v) for v in part.split(","))
+        items.append((x, y, math.cos(rot), math.sin(rot), length / 2.0, width / 2.0, f))
+    out = []
+    for px, py in path._xy:
+        mu = 1.0
+        for cx, cy, c, s, hl, hw, f in items:
+            dx, dy = px - cx, py - cy
+            # the car's half-width counts: a wheel on the patch is on it
+            if abs(c * dx + s * dy) <= hl + 1.0 and abs(-s * dx + c * dy) <= hw + 1.0:
+                mu = min(mu, f)
+        out.append(mu)
+    return out

@@ -469,6 +469,28 @@ def test_a_walker_who_walks_into_the_car_that_stopped_for_him_is_at_fault(tmp_pa
     assert v.fault is Fault.OTHER and v.rule == "stationary_struck", v.reason
 
 
+def test_a_car_that_stopped_in_a_walkers_path_is_the_egos_when_a_careful_driver_stops_short(tmp_path):
+    """The same case, its excuse tested by the careful driver's replay (the order since issue 31; before it, the
+    stationary rule decided ``other`` and no replay ran): the careful driver, which yields to p3's predicted
+    line, stops short of it and is never touched. The ego stopped in p3's way: its fault, and the reason says
+    what the careful driver did instead."""
+    from drivefuzz.oracle import OracleSettings
+
+    net = Path(NET).with_name("intersection.net.xml")
+    sc, ex = kept_case(tmp_path, "walker_into_a_stopped_car", str(net))
+    m = ex.misbehaviors[0]
+
+    def careful(s):
+        e = execute(s, oracles=OracleSettings().instantiate())
+        return e.misbehaviors, e.trace
+
+    v = attribute(sc, ex.trace, m, load_roadmap(net), replay=careful)
+    assert v.fault is Fault.EGO and v.rule == "stopped_in_the_way", v.reason
+    cf = v.evidence["counterfactual"]
+    assert cf["excuse"] == "stationary_struck" and not cf["same_failure"]
+    assert cf["careful_closest"] > 3.0 and "a careful driver avoided it: it came no closer to p3 than" in v.reason
+
+
 def test_changing_lanes_into_a_car_alongside_is_ego():
     # the reference ADS's real bug: its route needs A0B0_2 (left turn at B0), and it changes lanes into
     # a car driving alongside it there
@@ -634,15 +656,31 @@ def test_a_lane_lost_on_ice_names_the_ice():
     assert v.reason.endswith(v.evidence["cause"])
 
 
-def test_sliding_on_ice_into_a_parked_car_names_the_ice():
-    """A parked car on A0B0_1 and, before it, 60 m of road at friction 0.05 (black ice: the sensors do not
-    see it). The ego brakes for the car and slides into it; so does the careful driver: the verdict says so,
-    and names the ice."""
+def test_sliding_on_known_ice_into_a_parked_car_is_the_egos():
+    """A parked car on A0B0_1 and, before it, 60 m of road at friction 0.05. The ego (which senses no friction)
+    brakes for the car and slides into it. The careful driver knows the puddle (map knowledge: the replay tells
+    it), slows before the ice and stops behind the car: the ego's, and the reason names the ice. (Before the
+    careful driver knew puddles, it slid the same way and the verdict was ``other``.)"""
     from drivefuzz.scenario import Puddle
 
     parked = Actor(id="v0", kind="vehicle", nav="immobile", start_lane="A0B0_1", start_pos=80.0, speed=0.0)
     sc = scenario("A0B0_1", 10.0, "B0C0", 40.0, parked).model_copy(
         update={"puddles": (Puddle(x=60.0, y=-4.8, length=60.0, width=4.0, friction=0.05),)})
+    m, v = judge(sc, with_replay=True)
+    assert (m.oracle, m.actors) == ("collision", ("v0",))
+    assert v.fault is Fault.EGO and not v.evidence["counterfactual"]["same_failure"], v.reason
+    assert v.evidence["ground"].startswith("friction 0.05 under the ego from ") and v.evidence["ground"] in v.reason
+
+
+def test_sliding_on_ice_met_at_speed_into_a_parked_car_names_the_ice():
+    """The twin: the ego enters A0B0 at 8 m/s with the ice 2 m ahead; braking at 0.5 m/s^2 no driver stops
+    before the parked car, the careful driver neither: ``other``, and the reason names the ice."""
+    from drivefuzz.scenario import Puddle
+
+    parked = Actor(id="v0", kind="vehicle", nav="immobile", start_lane="A0B0_1", start_pos=85.0, speed=0.0)
+    sc = scenario("A0B0_1", 25.0, "B0C0", 40.0, parked)
+    sc = sc.model_copy(update={"mission": sc.mission.model_copy(update={"start_speed": 8.0}),
+                               "puddles": (Puddle(x=60.0, y=-4.8, length=60.0, width=4.0, friction=0.05),)})
     m, v = judge(sc, with_replay=True)
     assert (m.oracle, m.actors) == ("collision", ("v0",))
     assert v.fault is Fault.OTHER and v.evidence["counterfactual"]["same_failure"]
@@ -813,6 +851,7 @@ def test_every_rule_a_verdict_names_is_described():
     named = set(re.findall(r'self\.(?:ego|other)\(\s*"(\w+)"', source))
     named |= set(re.findall(r'Attribution\(Fault\.\w+, [^\n]*"(\w+)"\)$', source, re.M))
     named |= set(re.findall(r'\{"frame": misbehavior\.frame\}, "(\w+)"', source))
+    named |= set(attribute_module.AVOIDED.values())  # an excuse the careful driver's replay overturned
     assert named == set(RULES), (named ^ set(RULES))
     assert bug_class("collision/vehicle", "ego", "failed_to_yield") == (
         "collision/vehicle|ego|failed_to_yield", "collision/vehicle: it did not yield where its link must yield")

@@ -41,6 +41,27 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   the ego). An ego that crept (below the stationary speed) into a parked car, or drove into a car
   that stood in a junction it had entered on red, struck it.
 
+- **Excuses are hypotheses** that the careful driver's replay tests (:func:`test_excuse`), when the caller gives
+  ``replay``: several rules measure the situation with the ego's own speed and place, which its bug chose (a
+  walker "walked into its side": into a car that should not have been there; an ego "stationary when struck"
+  may have stopped where a careful driver would not). An excusing rule's ``other`` holds only if the careful
+  driver fails the same way (same oracle, same other party), or its replay says nothing about the event (it
+  failed first, never came near, did not run); otherwise the verdict is the ego's, under the rule of
+  :data:`AVOIDED` (``stationary_struck`` -> ``stopped_in_the_way``, ``pedestrian`` -> ``pedestrian_avoidable``,
+  ...), and its reason says what the careful driver did instead (how close it came to the other party, where
+  and how fast it was at the event's time). Two excuses hold without a replay (their evidence says why,
+  under :data:`KEPT`), because the ego could not have been elsewhere in a way that matters:
+
+  - *stationary*, struck in its rear half by a vehicle that did not slow by more than 1 m/s in the
+    :data:`APPROACH_WINDOW`: such a car strikes whatever stands or drives slower in that lane, wherever the
+    ego had stopped, and the ego stood lawfully there (not on red, not reaching into another's lane);
+  - *rear*, struck from behind while lawfully in its lane and braking no harder than :data:`COMFORT_DECEL`:
+    the follower's to avoid by any driver's standard. A hard stop for a hazard keeps the rule's excuse only if
+    the careful driver, who anticipates, had to brake and was struck too.
+
+  Without ``replay`` an excuse stands from the rules alone (the triage's first, cheap verdict that names the
+  signature; :func:`needs_replay` says which verdicts the triage must replay before it files them).
+
 - **Avoidability by counterfactual replay**: when no rule excuses the ego and the caller gives
   ``replay``, the same scenario is driven by the careful reference driver (ADS ``careful``,
   :mod:`ego.careful`). If it fails the same way (same oracle, same other party), the situation
@@ -161,6 +182,13 @@ RULES: dict[str, str] = {
     "stayed_behind": "it stayed behind a stationary body with a lane free",
     "stood_still": "it stood still with a lane free",
     "stood_in_lane": "it stood reaching into another's lane, in its way",
+    # an excuse that the careful driver's replay overturned (:data:`AVOIDED`): the ego's
+    "stopped_in_the_way": "it stopped where a careful driver did not, and was struck there",
+    "rear_end_avoidable": "it was struck from behind where a careful driver was not",
+    "cut_in_avoidable": "a vehicle cut in that a careful driver kept clear of",
+    "right_of_way_avoidable": "another did not give way, and a careful driver kept clear of it",
+    "pedestrian_avoidable": "it met a pedestrian that a careful driver kept clear of",
+    "blocked_avoidable": "it stood blocked or held up where a careful driver got on",
     # another's
     "stationary_struck": "it was struck while standing still",
     "rear_ended": "it was struck from behind while driving lawfully",
@@ -175,6 +203,30 @@ RULES: dict[str, str] = {
     # neither
     "no_evidence": "the trace lacks the evidence",
 }
+
+
+#: The rules that excuse the ego (``other``), each a hypothesis that the careful driver's replay tests, with the
+#: rule an ``ego`` verdict names when the careful driver avoided what the rule excused.
+AVOIDED: dict[str, str] = {
+    "stationary_struck": "stopped_in_the_way",
+    "rear_ended": "rear_end_avoidable",
+    "cut_in": "cut_in_avoidable",
+    "other_ran_red": "right_of_way_avoidable",
+    "other_failed_to_yield": "right_of_way_avoidable",
+    "pedestrian": "pedestrian_avoidable",
+    "pedestrian_in_lane": "blocked_avoidable",
+    "blocked": "blocked_avoidable",
+    "queue": "blocked_avoidable",
+    "held_up": "blocked_avoidable",
+}
+#: Evidence key of an excuse that holds without a replay (its value says why).
+KEPT = "kept_without_replay"
+
+
+def needs_replay(att: "Attribution") -> bool:
+    """Whether ``att`` (a verdict from the rules alone) is an excuse that the careful driver's replay must test
+    before it holds: the triage runs the replay for these as for the ego's verdicts."""
+    return att.fault is Fault.OTHER and att.rule in AVOIDED and KEPT not in att.evidence
 
 
 def bug_class(verdict: str, fault: str, rule: str) -> tuple[str, str]:
@@ -244,6 +296,8 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
     # what may make a lane impossible to keep: ice, or a strong crosswind
     unkeepable = (_slippery(trace, f) or _windy(scenario)) if oracle == "lane_invasion" else None
     settles = oracle not in NO_COUNTERFACTUAL or ev.replay_may_settle or unkeepable is not None
+    if replay is not None and needs_replay(verdict):
+        return test_excuse(scenario, trace, misbehavior, replay, verdict)
     if verdict.fault is not Fault.OTHER and not ev.decided and replay is not None and settles:
         out = counterfactual(scenario, misbehavior, replay, verdict)
         if out.fault is Fault.OTHER:  # name what the careful driver could not master either
@@ -323,9 +377,19 @@ def _reached(trace, position, radius: float = REACHED_M) -> bool:
     return bool(np.nanmin(d2) <= radius * radius)
 
 
+def careful_scenario(scenario):
+    """``scenario`` driven by the careful driver, told of its puddles (their friction is map knowledge: the
+    benchmark of what could have been done; the option's format is ``ego.careful.puddle_option``'s)."""
+    options = {}
+    if scenario.puddles:
+        options["puddles"] = ";".join(",".join(f"{v:.6g}" for v in (p.x, p.y, p.length, p.width, p.rotation, p.friction))
+                                      for p in scenario.puddles)
+    return scenario.model_copy(update={"ads": AdsSpec(name=CAREFUL_ADS, options=options)})
+
+
 def counterfactual(scenario, misbehavior, replay: Replay, verdict: Attribution) -> Attribution:
     """Drive ``scenario`` with the careful driver; the same failure makes the verdict ``other``."""
-    careful = scenario.model_copy(update={"ads": AdsSpec(name=CAREFUL_ADS)})
+    careful = careful_scenario(scenario)
     others, _trace = replay(careful)
     same = [m for m in others if m.oracle == misbehavior.oracle and set(m.actors) == set(misbehavior.actors)]
     evidence = dict(verdict.evidence)
@@ -343,6 +407,62 @@ def counterfactual(scenario, misbehavior, replay: Replay, verdict: Attribution) 
         return Attribution(Fault.UNCLEAR, verdict.reason + f"; the careful driver's replay failed first ({what})",
                            evidence, verdict.rule)
     return Attribution(verdict.fault, verdict.reason + "; a careful driver avoided it", evidence, verdict.rule)
+
+
+def test_excuse(scenario, trace, misbehavior, replay: Replay, verdict: Attribution) -> Attribution:
+    """Drive ``scenario`` with the careful driver to test the excuse ``verdict`` (``other``, a rule of
+    :data:`AVOIDED`): it holds if the careful driver fails the same way (same oracle, same other party), or if the
+    replay says nothing (it failed first, never came near the place, or did not run); otherwise the verdict is
+    the ego's, and its reason says what the careful driver did instead."""
+    careful = careful_scenario(scenario)
+    others, ctrace = replay(careful)
+    same = [m for m in others if m.oracle == misbehavior.oracle and set(m.actors) == set(misbehavior.actors)]
+    evidence = dict(verdict.evidence)
+    evidence["counterfactual"] = {"ads": CAREFUL_ADS, "misbehaviors": [f"{m.oracle}/{m.kind}" for m in others],
+                                  "same_failure": bool(same), "excuse": verdict.rule}
+    if same:
+        m = same[0]
+        return Attribution(Fault.OTHER, f"{verdict.reason}; a careful driver could not avoid it either ({m.oracle}/"
+                                        f"{m.kind} at {m.time:.1f} s)", evidence, verdict.rule)
+    earlier = [m for m in others if m.time <= misbehavior.time]
+    if ctrace is None or earlier or not _reached(ctrace, misbehavior.position):
+        what = (f"it failed first: {earlier[0].oracle}/{earlier[0].kind} at {earlier[0].time:.1f} s" if earlier else
+                "it did not run" if ctrace is None else "it never came near the place")
+        return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing ({what})",
+                           evidence, verdict.rule)
+    instead = _what_careful_did(ctrace, trace, misbehavior)
+    evidence["counterfactual"].update(instead[1])
+    return Attribution(Fault.EGO, f"{verdict.reason}, but a careful driver avoided it: {instead[0]}", evidence,
+                       AVOIDED[verdict.rule])
+
+
+def _what_careful_did(ctrace, trace, mb) -> tuple[str, dict[str, Any]]:
+    """What the careful driver's replay ``ctrace`` did about the event ``mb`` of ``trace``, in words, and as
+    evidence: how close it came to the other party, and where it was (and how fast) at the event's time."""
+    t_event = float(mb.time)
+    tc = np.asarray(ctrace["t"], dtype=float)
+    k = int(np.clip(np.searchsorted(tc, t_event), 0, len(tc) - 1))
+    x, y, v = np.asarray(ctrace["x"], float), np.asarray(ctrace["y"], float), np.asarray(ctrace["speed"], float)
+    px, py = mb.position
+    at = float(math.hypot(x[k] - px, y[k] - py))
+    ev: dict[str, Any] = {"careful_distance_to_place": round(at, 2), "careful_speed_then": round(float(v[k]), 2)}
+    where = (f"at {t_event:.1f} s it was {at:.1f} m from the place at {float(v[k]):.1f} m/s" if at > 1.0 else
+             f"at {t_event:.1f} s it was at the place at {float(v[k]):.1f} m/s")
+    who = mb.actors[0] if mb.actors else None
+    tr = actor_track(ctrace, who) if who is not None else None
+    if tr is not None:
+        d = np.hypot(tr.x - x, tr.y - y)
+        if np.any(~np.isnan(d)):
+            j = int(np.nanargmin(d))
+            gap = float(d[j]) - 0.5 * (float(tr.length) + EGO_LENGTH) if tr.kind == "vehicle" else \
+                float(d[j]) - 0.5 * EGO_LENGTH
+            ev.update(careful_closest=round(float(d[j]), 2), careful_speed_closest=round(float(v[j]), 2))
+            how = "stood" if v[j] <= STATIONARY_SPEED else f"drove at {float(v[j]):.1f} m/s"
+            return (f"it came no closer to {who} than {float(d[j]):.1f} m centre to centre (about {max(gap, 0.0):.1f} m "
+                    f"clear; it {how} then), and {where}", ev)
+    if mb.oracle in ("immobility", "mission"):
+        return f"it got on ({where})", ev
+    return where, ev
 
 
 class _Event:
@@ -475,7 +595,24 @@ class _Event:
         # chatter) struck it, whatever its speedometer said
         if not self._came_to_ego(oth):
             return None
-        return self.other("stationary_struck", f"the ego was stationary ({self.v:.2f} m/s) when the {oth.kind} {oth.id} struck its {side}")
+        reason = f"the ego was stationary ({self.v:.2f} m/s) when the {oth.kind} {oth.id} struck its {side}"
+        kept = self._never_braked(oth) if oth.kind == "vehicle" and point is not None and point[0] < 0.0 else None
+        if kept is not None:  # from behind, by a car that never braked: it would have struck whatever stood there
+            return self.other("stationary_struck", reason, **{KEPT: kept})
+        return self.other("stationary_struck", reason)
+
+    def _never_braked(self, oth: Track) -> str | None:
+        """Why an excuse against ``oth``, which struck the ego from behind, holds without a replay: it did not
+        slow down by more than 1 m/s over the :data:`APPROACH_WINDOW` before the contact (so it would have struck
+        any car that stood, or drove slower, where the ego was); None when it braked."""
+        w = frames_before(self.trace, self.f, APPROACH_WINDOW)
+        sp = oth.speed[w]
+        if not np.any(~np.isnan(sp)):
+            return None
+        shed = float(np.nanmax(sp)) - float(oth.speed[self.f])
+        if shed > 1.0:
+            return None
+        return f"{oth.id} struck from behind without braking (it shed {max(shed, 0.0):.1f} m/s)"
 
     def _came_to_ego(self, oth: Track) -> bool:
         """Whether the other body moved in the last :data:`APPROACH_WINDOW` seconds: farther than the
@@ -520,9 +657,12 @@ class _Event:
             hazard = None
         dv = float(oth.speed[f]) - self.v
         why = f" (it braked for {hazard})" if hazard else ""
+        # braking no harder than comfort, lawfully in its lane: the follower's to avoid, wherever the ego drove;
+        # hard braking, even for a hazard, may be what a careful driver's anticipation spares: the replay tests it
+        kept = {KEPT: "it drove lawfully in its lane and braked gently"} if hazard is None else {}
         return self.other("rear_ended", f"the vehicle {oth.id} struck the ego's rear half at {dv:.1f} m/s faster while the ego "
                           f"drove lawfully in its lane, braking at most {max(peak, 0.0):.1f} m/s^2{why}",
-                          peak_decel=peak, hazard=hazard)
+                          peak_decel=peak, hazard=hazard, **kept)
 
     def rule_cut_in(self, oth: Track, point, side: str, red) -> Attribution | None:
         """A vehicle moved into the ego's lane ahead of it (or alongside), and a careful driver, braking

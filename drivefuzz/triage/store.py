@@ -102,7 +102,7 @@ class FindingStore:
     def triage(self, scenario, misbehaviors: Sequence[Misbehavior], trace, key: str, termination: str,
                extra: dict[str, Any] | None = None) -> Triaged:
         """File the execution ``key`` of ``scenario`` whose oracles reported ``misbehaviors``."""
-        from drivefuzz.triage.attribute import Fault, attribute
+        from drivefuzz.triage.attribute import Fault, attribute, needs_replay
         from drivefuzz.triage.signature import signature
 
         m = misbehaviors[0]
@@ -117,7 +117,7 @@ class FindingStore:
             return Triaged(seen, _key_of(seen), self._fault_of(seen, fault), False, 0)
         rules_key = sig_key
         spent = 0
-        if trace is not None and att.fault is not Fault.OTHER and self.cfg.counterfactual:
+        if trace is not None and (att.fault is not Fault.OTHER or needs_replay(att)) and self.cfg.counterfactual:
             def replay(sc):
                 nonlocal spent
                 spent += 1
