@@ -12,7 +12,12 @@ Options (``--ads-option K=V``):
   Hidden faults, silent on every committed seed (no actors, clear weather), for measuring how fast a search
   reveals a bug that only a situation it builds can show: ``ignore_pedestrians`` (pedestrians are never
   obstacles), ``late_braking`` (obstacles count only within :data:`LATE_BRAKING_M` m), ``no_fog_slowdown``
-  (no assured-clear-distance cap: it keeps its clear-weather speed in fog).
+  (no assured-clear-distance cap: it keeps its clear-weather speed in fog), and three that bite in other
+  encounters (issue 31, for ``tools/eval_attribution.py``): ``no_walker_prediction`` (a walker counts only where
+  it is, never where it walks to, and only once in the car's own corridor: it drives into walkers' paths), ``short_headway`` (it follows vehicles at a
+  :data:`SHORT_HEADWAY_S` s time gap and :data:`SHORT_HEADWAY_GAP` m at a standstill, blind to how fast it
+  closes in: a leader that brakes hard is struck), ``narrow_corridor`` (a vehicle counts only with its centre within :data:`NARROW_CORRIDOR_M` m plus
+  half its width of the path: a car cutting or nosing in is seen late).
 - ``speed_margin``: fraction of the speed limit it aims for (default 0.95).
 - ``max_lat_accel``: comfort limit in curves [m/s^2].
 - ``sensor_range``: clear-weather sensor range [m].
@@ -45,9 +50,13 @@ from ego.planning import (CELL, assured_clear_speed, build_path, idm_accel, lawf
 from ego.sensing import Sensors, SensorSpec
 
 FAULTS = ("none", "speeding", "no_traffic_lights", "no_control", "steer_left", "ignore_pedestrians", "late_braking",
-          "no_fog_slowdown")
+          "no_fog_slowdown", "no_walker_prediction", "short_headway", "narrow_corridor")
 #: [m] the ``late_braking`` fault sees obstacles only this close (front bumper to their centre, along the path).
 LATE_BRAKING_M = 4.0
+#: [s], [m] the ``short_headway`` fault's time gap and standstill gap to vehicles (the IDM's T and s0).
+SHORT_HEADWAY_S, SHORT_HEADWAY_GAP = 0.3, 0.5
+#: [m] the ``narrow_corridor`` fault's corridor for vehicles beyond half their width (the clean ADS: 1.3 m).
+NARROW_CORRIDOR_M = 0.2
 #: [s] the ``steer_left`` fault drives normally this long after the first step, then takes over.
 STEER_LEFT_DELAY = 1.0
 #: Steering command of the ``steer_left`` fault, as a fraction of full lock (0.15 rad at the road wheels).
@@ -80,7 +89,8 @@ class ReferenceADS(ADS):
 
     class Options(ADS.Options):
         fault: Literal["none", "speeding", "no_traffic_lights", "no_control", "steer_left", "ignore_pedestrians",
-                       "late_braking", "no_fog_slowdown"] = "none"
+                       "late_braking", "no_fog_slowdown", "no_walker_prediction", "short_headway",
+                       "narrow_corridor"] = "none"
         speed_margin: float = 0.95
         max_lat_accel: float = 2.5
         sensor_range: float = 100.0
@@ -183,12 +193,16 @@ class ReferenceADS(ADS):
         reach = 90.0 + abs(lat_c)
         ex, ey = ego.x, ego.y
         fault = self.options.fault
+        # the faults of issue 31, settled once per step, not per object
+        ped_horizons, ped_side = ((0.0,), 0.0) if fault == "no_walker_prediction" else ((0.0, 1.5), 0.8)
+        veh_side = NARROW_CORRIDOR_M - 1.3 if fault == "narrow_corridor" else 0.0
+        headway = fault == "short_headway"
         for tr in world.tracks:
             ped = tr[PED]
             if ped and fault == "ignore_pedestrians":
                 continue
-            corridor = 1.3 + tr[WIDTH] / 2 + (0.8 if ped else 0.0)
-            for horizon in (0.0, 1.5) if ped else (0.0,):
+            corridor = 1.3 + tr[WIDTH] / 2 + (ped_side if ped else veh_side)
+            for horizon in ped_horizons if ped else (0.0,):
                 px = tr[X] + tr[SPEED] * math.cos(tr[HEADING]) * horizon if horizon else tr[X]
                 py = tr[Y] + tr[SPEED] * math.sin(tr[HEADING]) * horizon if horizon else tr[Y]
                 if abs(px - ex) > reach or abs(py - ey) > reach:
@@ -207,7 +221,10 @@ class ReferenceADS(ADS):
                     continue
                 gap = ahead - half - tr[LENGTH] / 2
                 dv = v - tr[SPEED] * max(math.cos(tr[HEADING] - ego.heading), 0.0)
-                accel = min(accel, idm_accel(v, v_free, gap, dv))
+                if headway and not ped:  # and blind to the closing speed: it reads the leader's speed as its own
+                    accel = min(accel, idm_accel(v, v_free, gap, 0.0, s0=SHORT_HEADWAY_GAP, T=SHORT_HEADWAY_S))
+                else:
+                    accel = min(accel, idm_accel(v, v_free, gap, dv))
         return accel
 
     def _light_accel(self, world, v: float) -> float:
