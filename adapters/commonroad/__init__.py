@@ -1,0 +1,1 @@
+"""CommonRoad-style planners as drivefuzz ADS plugins (the ``commonroad`` extra)."""

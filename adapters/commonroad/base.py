@@ -1,0 +1,238 @@
+"""The base of every CommonRoad-style planner plugin: all of the ADS except the planner call.
+
+A planner plugs in with a subclass that implements :meth:`CommonRoadADS.make_planner` (once per
+mission, with the reference path and the car) and :meth:`CommonRoadADS.plan` (one planning cycle:
+the car's rear-axle state, a ``pycrcc.CollisionChecker`` holding the road boundary, the predicted
+road users and a stop-line wall, and the desired speed; it returns a :class:`Plan` or None).
+:mod:`adapters.commonroad.reactive` is the first; docs/ads.md says how to add another.
+
+Every ``replan_period`` seconds the base builds the planner's inputs (:mod:`adapters.commonroad.scene`)
+and asks for a plan; every step it tracks the newest plan: pure pursuit on the plan's rear-axle path
+(continued straight on past its end) for the steering, the plan's acceleration plus a proportional
+term on its speed for the pedals. A planner that returns None or raises is an ADS failure: the
+fail-safe brakes at ``failsafe_decel`` along the last plan's path, and the event is recorded. At
+the goal the car is held still. Every cycle's decisions (outcome, wall, desired speed) are kept and
+handed to the trace by :meth:`trace_info` (``meta.json``, key ``ads_info``).
+
+Units: SI, radians ENU. Deterministic: no clock, no randomness; the cycle falls on step counts.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+import commonroad_dc.pycrcc as pycrcc
+from pydantic import Field
+
+from drivefuzz.ads import ADS, Control, MissionInfo, Observation
+from drivefuzz.sim.physics import VehicleParams
+from ego.actuation import PurePursuit
+from ego.planning import speed_profile
+
+from adapters.commonroad import scene
+
+#: [m] the plan's path is continued this far along the reference path past its last point, for the path tracker.
+TRACK_TAIL = 30.0
+#: [s] the desired speed's ramp to a stop point aims this many seconds (at the current speed) short of it
+STOP_LAG = 1.0
+#: [m/s^2] the desired speed's braking ramp before a bend (the reference ADS's).
+CURVE_DECEL = 1.5
+#: [m/s^2] per [m/s]: the pedal command's proportional term on the plan's speed.
+SPEED_GAIN = 1.0
+#: [s] the tracker reads the plan's speed and acceleration this far ahead (the actuators' lag).
+PREVIEW = 0.1
+#: Outcome codes of a planning cycle, as recorded in the trace.
+PLANNED, NO_PLAN, RAISED = "plan", "none", "raised"
+
+
+class Plan(NamedTuple):
+    """A planned trajectory: per state, time [s from the cycle's start], rear-axle position [m],
+    heading [rad], speed [m/s] and acceleration [m/s^2]."""
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    heading: np.ndarray
+    v: np.ndarray
+    a: np.ndarray
+
+
+class CarState(NamedTuple):
+    """The car as the planner gets it: the rear axle's position [m], heading [rad], speed [m/s],
+    acceleration [m/s^2], yaw rate [rad/s] and road-wheel angle [rad]."""
+
+    x: float
+    y: float
+    heading: float
+    speed: float
+    accel: float
+    yaw_rate: float
+    steer: float
+
+
+class CommonRoadADS(ADS):
+    """Everything but the planner call; see the module docstring."""
+
+    name = ""
+
+    class Options(ADS.Options):
+        replan_period: float = Field(0.3, gt=0.0)  # [s] between planning cycles (rounded to whole steps)
+        horizon: float = Field(3.0, gt=0.0)  # [s] planning horizon
+        planner_dt: float = Field(0.1, gt=0.0)  # [s] the planner's time step
+        speed_margin: float = Field(0.95, gt=0.0)  # desired speed: this fraction of the speed limit ...
+        max_lat_accel: float = Field(2.25, ge=0.0)  # [m/s^2] ... and the bends' limit at this (0: none)
+        stop_decel: float = Field(2.0, gt=0.0)  # [m/s^2] the desired speed falls to stop at the goal or a wall
+        failsafe_decel: float = Field(6.0, gt=0.0)  # [m/s^2] braking when the planner has no plan
+
+    def reset(self, mission: MissionInfo, roadmap) -> None:
+        self.params = params = VehicleParams()
+        self.mission = mission
+        self.ref_pts = scene.reference_path(roadmap, tuple(mission.route), mission.start_lane, mission.start_pos,
+                                            mission.goal_edge, mission.goal_pos)
+        self.ref = scene.as_path(self.ref_pts)
+        _, self.s_goal, _ = self.ref.locate(*mission.goal_xy, hint=0, window=len(self.ref_pts))
+        self.profile = _curve_profile(self.ref_pts, self.options.max_lat_accel)
+        self.boundary, self.n_boundary = scene.boundary_group(scene.boundary_segments(roadmap), self.ref_pts)
+        opts = self.options
+        self.steps = max(int(round(opts.horizon / opts.planner_dt)), 1)
+        self.replan_every = max(int(round(opts.replan_period / mission.step_length)), 1)
+        self.tracker = PurePursuit(params.wheelbase, params.max_road_wheel_angle)
+        self.k = 0  # steps since reset
+        self.ref_idx = 0
+        self.limit = 13.89  # [m/s] until the first lane with a limit is seen
+        self.plan_: Plan | None = None
+        self.plan_t0 = 0.0
+        self.plan_path = None
+        self.failsafe = False
+        self._done = False
+        self.log: dict[str, list] = {"t": [], "outcome": [], "error": [], "wall": [], "v_des": []}
+        self.make_planner(self.ref_pts, params)
+
+    # -- for subclasses ---------------------------------------------------------------------------
+    @abc.abstractmethod
+    def make_planner(self, reference: np.ndarray, params: VehicleParams) -> None:
+        """Set the planner up for one mission: ``reference`` (n, 2) [m] reaches past the goal; ``params``
+        is drivefuzz's car (every ADS drives the same car)."""
+
+    @abc.abstractmethod
+    def plan(self, state: CarState, checker: "pycrcc.CollisionChecker", desired_speed: float) -> Plan | None:
+        """One planning cycle from ``state`` (time step 0), avoiding what ``checker`` holds (time-variant
+        objects over ``self.steps`` steps of ``self.options.planner_dt``); None when there is no plan."""
+
+    # -- the ADS ----------------------------------------------------------------------------------
+    def done(self) -> bool:
+        return self._done
+
+    def trace_info(self) -> dict[str, Any]:
+        """The adapter's decisions, one entry per planning cycle, and their counts."""
+        out = self.log["outcome"]
+        return {"adapter": type(self).__name__, "replan_period_steps": self.replan_every, "horizon_steps": self.steps,
+                "boundary_boxes": self.n_boundary,
+                "counts": {k: out.count(k) for k in (PLANNED, NO_PLAN, RAISED)}, "cycles": dict(self.log)}
+
+    def step(self, obs: Observation) -> Control:
+        ego = obs.ego
+        if math.isfinite(obs.speed_limit) and obs.speed_limit > 0:
+            self.limit = obs.speed_limit
+        self.ref_idx, s_c, _ = self.ref.locate(ego.x, ego.y, self.ref_idx)
+        to_goal = self.s_goal - s_c
+        if to_goal < 1.5 and ego.speed < 0.5:
+            self._done = True
+        if self._done:
+            return Control(0.0, 0.0, 1.0)
+        if self.k % self.replan_every == 0:
+            self._cycle(obs, s_c, to_goal)
+        self.k += 1
+        return self._track(obs)
+
+    def _cycle(self, obs: Observation, s_c: float, to_goal: float) -> None:
+        """One planning cycle: the planner's inputs, its call, and the record of what happened."""
+        ego, opts = obs.ego, self.options
+        v_des = min(self.limit * opts.speed_margin, self.profile[self.ref_idx])
+        # the planner reaches a desired speed only by the end of its samples: the ramp aims short by STOP_LAG
+        lag = STOP_LAG * ego.speed
+        v_des = min(v_des, scene.stop_speed(to_goal, opts.stop_decel, margin=lag))
+        checker = pycrcc.CollisionChecker()
+        checker.add_collision_object(self.boundary)
+        for tvo in scene.predictions(obs, self.steps, opts.planner_dt, reach=ego.speed * opts.horizon + 60.0):
+            checker.add_collision_object(tvo)
+        wall = scene.stop_wall(obs, self.ref, s_c + ego.length / 2.0)
+        if wall is not None:
+            checker.add_collision_object(scene.wall_shape(wall))
+            v_des = min(v_des, scene.stop_speed(obs.traffic_light.distance, opts.stop_decel, margin=1.0 + lag))
+        r = self.params.centre_to_rear_axle
+        ch, sh = math.cos(ego.heading), math.sin(ego.heading)
+        state = CarState(ego.x - r * ch, ego.y - r * sh, ego.heading, ego.speed, ego.ax, ego.yaw_rate,
+                         ego.road_wheel_angle)
+        error = ""
+        try:
+            result = self.plan(state, checker, v_des)
+        except Exception as exc:  # the planner's failure is the ADS's failure: fail-safe, recorded
+            result, error = None, f"{type(exc).__name__}: {exc}"[:200]
+        outcome = PLANNED if result is not None else (RAISED if error else NO_PLAN)
+        log = self.log
+        log["t"].append(round(obs.t, 6))
+        log["outcome"].append(outcome)
+        log["error"].append(error)
+        log["wall"].append(wall is not None)
+        log["v_des"].append(round(v_des, 4))
+        self.failsafe = result is None
+        if result is not None:
+            self.plan_, self.plan_t0 = result, obs.t
+            self.plan_path = _track_path(result, self.ref)
+        elif self.plan_path is None:  # no plan yet: steer along the reference path
+            self.plan_path = self.ref
+
+    def _track(self, obs: Observation) -> Control:
+        """Steering and pedals that follow the newest plan (the fail-safe brakes along its path)."""
+        ego = obs.ego
+        v = ego.speed
+        r = self.params.centre_to_rear_axle
+        ch, sh = math.cos(ego.heading), math.sin(ego.heading)
+        rx, ry = ego.x - r * ch, ego.y - r * sh
+        path = self.plan_path
+        _, s_rear, _ = path.locate(rx, ry, hint=0, window=len(path.pts))
+        steer = self.tracker.steer(path, s_rear, rx, ry, ego.heading, v)
+        plan = self.plan_
+        rel = obs.t - self.plan_t0 + PREVIEW
+        if self.failsafe or plan is None or rel > plan.t[-1]:
+            accel = -self.options.failsafe_decel
+            v_plan = 0.0
+        else:
+            v_plan = float(np.interp(rel, plan.t, plan.v))
+            accel = float(np.interp(rel, plan.t, plan.a)) + SPEED_GAIN * (v_plan - v)
+        return Control(steer, *self._pedals(accel, v, v_plan))
+
+    def _pedals(self, accel: float, v: float, v_plan: float) -> tuple[float, float]:
+        """(throttle, brake) for ``accel`` [m/s^2]; a car at rest with a plan to stay there holds still."""
+        if v < 0.05 and v_plan < 0.05 and accel <= 0.0:
+            return 0.0, 0.3
+        if accel >= 0.0:
+            return min(accel / 3.5, 1.0), 0.0
+        return 0.0, min(-accel / self.params.max_brake_decel, 1.0)
+
+
+def _track_path(plan: Plan, ref):
+    """The plan's rear-axle path, 1 m apart, continued :data:`TRACK_TAIL` metres along the reference path
+    ``ref`` (the fail-safe brakes along it when the plan has run out)."""
+    pts = scene._dedup(np.stack([plan.x, plan.y], axis=1))
+    _, s_end, _ = ref.locate(float(pts[-1, 0]), float(pts[-1, 1]), hint=0, window=len(ref.pts))
+    tail = np.array([ref.point_at(s_end + k) for k in range(2, int(TRACK_TAIL) + 1)])
+    return scene.as_path(scene._resample(scene._dedup(np.vstack([pts, tail])), 1.0))
+
+
+def _curve_profile(ref_pts: np.ndarray, max_lat_accel: float) -> list[float]:
+    """Per reference point, the bends' speed limit [m/s] with a braking ramp before each (the reference
+    ADS's :func:`ego.planning.speed_profile`); no limit when ``max_lat_accel`` is 0."""
+    if max_lat_accel <= 0.0:
+        return [math.inf] * len(ref_pts)
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(ref_pts, axis=0).T))])
+    head = np.unwrap(np.arctan2(*(np.diff(ref_pts, axis=0)[:, ::-1].T)))
+    curv = np.zeros(len(ref_pts))
+    if len(head) > 2:
+        dk = np.abs(np.diff(head)) / np.maximum(np.diff(s[:-1]), 1e-6)
+        curv[1:-1] = np.convolve(dk, np.ones(5) / 5, mode="same")
+    return speed_profile(scene.Path(ref_pts, s, curv), max_lat_accel, CURVE_DECEL, lead_m=4.0)

@@ -1,0 +1,121 @@
+"""``commonroad-reactive``: TUM's CommonRoad reactive planner (``commonroad-reactive-planner`` 2025.1).
+
+A sampling-based Frenet planner: quartic/quintic polynomials in the curvilinear frame of the reference
+path, ranked by cost, checked for kinematic feasibility and then for collisions with the
+drivability checker's C++ checker (``pycrcc``); a standstill trajectory when the car is at rest.
+This subclass only sets it up and calls it; everything else is :class:`adapters.commonroad.base.CommonRoadADS`.
+
+Set-up, as measured (issue 32): ``debug.multiproc`` off (with it each plan starts six processes
+and is 2.5x slower); the planner's constructor insists on a CommonRoad scenario, so it gets an
+empty one and a planning problem at the start; the reference path goes in as a coordinate
+system (``set_reference_path(reference_path=...)`` fails with commonroad-clcs 2025.x), smoothed by the
+coordinate system's curve subdivision (the joins of SUMO's lane shapes have kinks: plain resampling left
+a curvature of 0.33 1/m at the town seed 000's left turn, above the car's 0.245, so every sample that
+followed the road there was infeasible; subdivision: 0.19 1/m, at most 0.8 m off the lanes); the car is
+drivefuzz's (wheelbase, 0.6 rad road-wheel angle, 0.8 rad/s steering rate, 9 m/s^2 braking and
+the power limit as CommonRoad's switching speed), not the default BMW 320i, whose steering rate
+rejects every sample of a 90-degree town turn. ``set_desired_velocity`` ignores the requested speed
+when ``current_speed == 0.0`` (it takes the planning problem's speed instead, and a car at rest stays
+there), so a car at rest is passed as moving at :data:`AT_REST` m/s.
+
+One fix of the planner's contract (option ``domain_shim``, on by default): its kinematic check asks the
+coordinate system for each sample's Cartesian points and treats None as "out of the projection domain,
+infeasible"; commonroad-clcs 2025.x (which the planner's own requirements bring) raises
+``CurvilinearProjectionDomainLateralError`` or ``...LongitudinalError`` instead, so one sample that
+leaves the domain aborts the whole cycle (on the town seed 000, 36 of 324 cycles on a straight road).
+:class:`DomainAsNone` turns those two exceptions back into None; ``domain_shim=false`` shows the
+planner as installed. docs/bugs/commonroad-reactive-planner.md, bug 1.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+from commonroad.common.util import Interval
+from commonroad_clcs.config import CLCSParams, ProcessingOption
+from commonroad_clcs.pycrccosy import (CurvilinearProjectionDomainLateralError,
+                                       CurvilinearProjectionDomainLongitudinalError)
+from commonroad.planning.goal import GoalRegion
+from commonroad.planning.planning_problem import PlanningProblem
+from commonroad.scenario.scenario import Scenario
+from commonroad.scenario.state import CustomState, InitialState
+from commonroad_rp.reactive_planner import ReactivePlanner
+from commonroad_rp.state import ReactivePlannerState
+from commonroad_rp.utility.config import ReactivePlannerConfiguration
+from commonroad_rp.utility.utils_coordinate_system import CoordinateSystem
+
+from drivefuzz.sim.physics import VehicleParams
+
+from adapters.commonroad.base import CarState, CommonRoadADS, Plan
+
+#: [m/s] the speed a car at rest is given for ``set_desired_velocity`` (see the module docstring).
+AT_REST = 1e-3
+
+
+def planner_config(params: VehicleParams, dt: float, steps: int) -> ReactivePlannerConfiguration:
+    """The planner's configuration for drivefuzz's car, a horizon of ``steps`` x ``dt`` seconds."""
+    config = ReactivePlannerConfiguration()
+    config.planning.dt = dt
+    config.planning.time_steps_computation = steps
+    config.planning.planning_horizon = dt * steps
+    config.debug.multiproc = False
+    config.debug.logging_level = "ERROR"
+    v = config.vehicle
+    v.length, v.width = params.length, params.width
+    v.wb_front_axle, v.wb_rear_axle = params.centre_to_front_axle, params.centre_to_rear_axle
+    v.a_max = params.max_brake_decel
+    # CommonRoad's acceleration limit above the switching speed is a_max * v_switch / v: a power limit
+    v.v_switch = params.max_power / (params.mass * params.max_brake_decel)
+    v.delta_min, v.delta_max = -params.max_road_wheel_angle, params.max_road_wheel_angle
+    v.v_delta_min, v.v_delta_max = -params.max_steer_rate, params.max_steer_rate
+    v._update_computed_params()
+    return config
+
+
+class DomainAsNone(CoordinateSystem):
+    """The planner's coordinate system, answering None (as the planner expects) where clcs 2025.x raises."""
+
+    def convert_to_cartesian_coords(self, s: float, d: float):
+        try:
+            return super().convert_to_cartesian_coords(s, d)
+        except (CurvilinearProjectionDomainLateralError, CurvilinearProjectionDomainLongitudinalError):
+            return None
+
+
+class ReactivePlannerADS(CommonRoadADS):
+    name = "commonroad-reactive"
+
+    class Options(CommonRoadADS.Options):
+        domain_shim: bool = True  # samples out of the projection domain are infeasible, not an exception
+
+    def make_planner(self, reference: np.ndarray, params: VehicleParams) -> None:
+        dt = self.options.planner_dt
+        config = planner_config(params, dt, self.steps)
+        x, y = reference[0]
+        start = InitialState(time_step=0, position=np.array([x, y]), orientation=0.0, velocity=0.0,
+                             acceleration=0.0, yaw_rate=0.0, slip_angle=0.0)
+        goal = GoalRegion([CustomState(time_step=Interval(0, 100000))])
+        config.update(scenario=Scenario(dt), planning_problem=PlanningProblem(1, start, goal))
+        self.planner = ReactivePlanner(config)
+        logging.getLogger("RP_LOGGER").setLevel(logging.ERROR)
+        cls = DomainAsNone if self.options.domain_shim else CoordinateSystem
+        self.planner.set_reference_path(coordinate_system=cls(reference, clcs_params=CLCSParams(
+            processing_option=ProcessingOption.CURVE_SUBDIVISION)))
+
+    def plan(self, state: CarState, checker, desired_speed: float) -> Plan | None:
+        planner = self.planner
+        x0 = ReactivePlannerState(time_step=0, position=np.array([state.x, state.y]), orientation=state.heading,
+                                  velocity=state.speed, acceleration=state.accel, yaw_rate=state.yaw_rate,
+                                  steering_angle=state.steer)
+        planner.reset(initial_state_cart=x0, collision_checker=checker)
+        planner.set_desired_velocity(desired_speed, current_speed=max(state.speed, AT_REST))
+        result = planner.plan()
+        if result is None:
+            return None
+        states = result[0].state_list
+        dt = self.options.planner_dt
+        return Plan(np.array([s.time_step * dt for s in states]),
+                    np.array([s.position[0] for s in states]), np.array([s.position[1] for s in states]),
+                    np.array([s.orientation for s in states]), np.array([s.velocity for s in states]),
+                    np.array([s.acceleration for s in states]))

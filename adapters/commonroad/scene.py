@@ -1,0 +1,244 @@
+"""The planner's world, built from drivefuzz's road map and one Observation.
+
+Everything here is a decision the adapter makes for the planner, kept simple and visible
+(DESIGN.md: an adapter is a boundary, not a driver):
+
+- :func:`reference_path`: the reference ADS's lane-level path along the mission route
+  (:func:`ego.planning.build_path`), continued along the road (or straight on) for
+  :data:`PAST_GOAL` metres past the goal, because the CommonRoad curvilinear frame raises
+  ``CurvilinearProjectionDomainLongitudinalError`` for samples past its end;
+- :func:`boundary_segments`: the edge of the drivable area (every passenger lane, normal and
+  internal, and every junction shape; sidewalks are outside) as short segments, computed once
+  per network; :func:`boundary_group` keeps those near the route as thin boxes just outside the road;
+- :func:`predictions`: every other road user as a box moving at constant velocity along its
+  heading over the planning horizon (a time-variant collision object);
+- :func:`stop_wall`: a virtual wall across the road at a red (or, when there is room to stop
+  comfortably, yellow) stop line;
+- :func:`stop_speed`: the desired speed that stops the car at a point (the goal, the wall).
+
+Units: SI, radians ENU (0 = east, counter-clockwise).
+"""
+
+from __future__ import annotations
+
+import math
+import weakref
+
+import numpy as np
+import commonroad_dc.pycrcc as pycrcc
+from shapely import LineString, Polygon, unary_union
+from shapely.geometry.polygon import orient
+
+from drivefuzz.ads import Observation
+from drivefuzz.scenario.roadmap import PASSENGER, RoadMap
+from ego.planning import Path, build_path, lawful_route
+
+#: [m] the reference path goes on this far past the goal ...
+PAST_GOAL = 120.0
+#: [m] ... and starts this far (straight back) behind the car's start: near its ends the curvilinear
+#: frame's projection domain narrows, and a car within a few metres of the start raised
+#: ``CurvilinearProjectionDomainLateralError`` for its lateral samples.
+BEFORE_START = 30.0
+#: [m] half the thickness of a boundary box; the box lies just outside the road.
+WALL_HALF = 0.25
+#: [m] boundary segments farther than this from the reference path are left out of a mission's checker.
+BOUNDARY_REACH = 40.0
+#: [m] half the width of the stop-line wall: wider than the planner's lateral samples (+-3 m) and half a car.
+STOP_WALL_HALF_WIDTH = 4.5
+#: [m] half the depth of the stop-line wall (it starts at the stop line).
+STOP_WALL_HALF_DEPTH = 0.5
+#: [m/s^2] a yellow light gets a wall only if the car can stop before the line at this deceleration
+#: (the reference ADS's rule).
+YELLOW_DECEL = 4.0
+
+_SEGMENTS: "weakref.WeakKeyDictionary[RoadMap, np.ndarray]" = weakref.WeakKeyDictionary()
+
+
+def road_area(rmap: RoadMap):
+    """The drivable area (shapely): every lane that allows passenger cars, buffered to its width, and
+    every junction shape; closed by 0.1 m so that the seams between neighbouring lanes vanish."""
+    parts = []
+    for edge in rmap.net.getEdges(withInternal=True):
+        if edge.getFunction() not in ("", "internal"):
+            continue
+        for lane in edge.getLanes():
+            if not lane.allows(PASSENGER):
+                continue
+            shape = [p[:2] for p in lane.getShape()]
+            if len(shape) >= 2 and LineString(shape).length > 0.01:
+                parts.append(LineString(shape).buffer(lane.getWidth() / 2.0, cap_style="flat"))
+    for node in rmap.net.getNodes():
+        shape = [p[:2] for p in node.getShape()]
+        if len(shape) >= 3:
+            poly = Polygon(shape).buffer(0)
+            if not poly.is_empty:
+                parts.append(poly)
+    return unary_union(parts).buffer(0.1, join_style="mitre").buffer(-0.1, join_style="mitre")
+
+
+def boundary_segments(rmap: RoadMap) -> np.ndarray:
+    """(n, 4) the drivable area's edge as segments ``x0, y0, x1, y1`` [m] with the road on their left;
+    computed once per road map (a campaign runs thousands of missions on one network)."""
+    seg = _SEGMENTS.get(rmap)
+    if seg is None:
+        area = road_area(rmap)
+        polys = list(area.geoms) if hasattr(area, "geoms") else [area]
+        rows = []
+        for poly in polys:
+            poly = orient(poly, 1.0)  # exterior counter-clockwise, holes clockwise: the road is on the left
+            for ring in (poly.exterior, *poly.interiors):
+                pts = np.asarray(ring.coords)
+                rows.append(np.hstack([pts[:-1], pts[1:]]))
+        seg = np.vstack(rows) if rows else np.zeros((0, 4))
+        seg = seg[np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) > 1e-3]
+        _SEGMENTS[rmap] = seg
+    return seg
+
+
+def boundary_group(segments: np.ndarray, path_pts: np.ndarray, reach: float = BOUNDARY_REACH):
+    """A ``pycrcc.ShapeGroup`` of thin boxes just outside the road along the segments within ``reach``
+    metres of ``path_pts`` (n, 2); each box overlaps its neighbours by its own thickness at the ends."""
+    from scipy.spatial import cKDTree
+
+    group = pycrcc.ShapeGroup()
+    if len(segments) == 0:
+        return group, 0
+    mid = (segments[:, :2] + segments[:, 2:]) / 2.0
+    half_len = np.hypot(segments[:, 2] - segments[:, 0], segments[:, 3] - segments[:, 1]) / 2.0
+    dist, _ = cKDTree(path_pts).query(mid)
+    keep = np.flatnonzero(dist - half_len <= reach)
+    for i in keep.tolist():
+        x0, y0, x1, y1 = segments[i].tolist()
+        ang = math.atan2(y1 - y0, x1 - x0)
+        # the road is on the left: the box goes to the right, outside
+        cx = (x0 + x1) / 2.0 + WALL_HALF * math.sin(ang)
+        cy = (y0 + y1) / 2.0 - WALL_HALF * math.cos(ang)
+        group.add_shape(pycrcc.RectOBB(float(half_len[i]) + WALL_HALF, WALL_HALF, ang, cx, cy))
+    return group, len(keep)
+
+
+def reference_path(rmap: RoadMap, route: tuple[str, ...], start_lane: str, start_pos: float, goal_edge: str,
+                   goal_pos: float, past_goal: float = PAST_GOAL) -> np.ndarray:
+    """(n, 2) the reference path [m], 1 m apart: the reference ADS's lane plan along the route, then on
+    along the road past the goal (the straightest connection at each junction, straight on at a dead
+    end) until it reaches ``past_goal`` metres beyond the goal; it starts :data:`BEFORE_START` metres
+    straight back behind the start."""
+    route = lawful_route(rmap, tuple(route), start_lane)
+    path, _ = build_path(rmap, route, start_lane, start_pos, goal_edge, goal_pos)
+    pts = [path.pts]
+    goal_lane = rmap.drive_lane(goal_edge)
+    gx, gy, _ = rmap.geom(goal_lane).position(goal_pos)
+    end = path.pts[-1]
+    # which lane the path ends on: the goal edge's lane nearest to its last point
+    lanes = [l for l in rmap.edge(goal_edge).getLanes() if l.allows(PASSENGER)]
+    lane = min(lanes, key=lambda l: abs(rmap.geom(l.getID()).project(*end)[1]))
+    pos = rmap.geom(lane.getID()).project(*end)[0]
+    have = (path.s[-1] - path.locate(gx, gy, hint=0, window=len(path.pts))[1])
+    tail = rmap.geom(lane.getID())
+    if pos < tail.length - 0.5:
+        pts.append(tail.positions(np.append(np.arange(pos + 1.0, tail.length, 1.0), tail.length)))
+        have += tail.length - pos
+    seen = {lane.getID()}
+    while have < past_goal:
+        nxt = _straightest(lane)
+        if nxt is None or nxt[1].getID() in seen:
+            break
+        via, lane = nxt
+        seen.add(lane.getID())
+        for v in ([] if not via else rmap.internal_chain(via)):
+            vp = np.asarray(rmap.lane(v).getShape(), dtype=float)[:, :2]
+            pts.append(vp)
+            have += float(np.hypot(*np.diff(vp, axis=0).T).sum())
+        lp = rmap.geom(lane.getID()).pts
+        pts.append(lp)
+        have += float(rmap.geom(lane.getID()).cum[-1])
+    out = _dedup(np.vstack(pts))
+    d = out[0] - out[1]
+    d = d / (np.hypot(*d) or 1.0)
+    out = np.vstack([out[0] + d * np.arange(BEFORE_START, 0.0, -1.0)[:, None], out])
+    if have < past_goal:  # a dead end: straight on
+        d = out[-1] - out[-2]
+        d = d / (np.hypot(*d) or 1.0)
+        extra = past_goal - have + 1.0
+        out = np.vstack([out, out[-1] + d * np.arange(1.0, extra + 1.0)[:, None]])
+    return _resample(out, 1.0)
+
+
+def _straightest(lane):
+    """(via lane id or '', next lane) of the connection out of ``lane`` that turns least, or None."""
+    best, best_turn = None, math.inf
+    shape = lane.getShape()
+    h0 = math.atan2(shape[-1][1] - shape[-2][1], shape[-1][0] - shape[-2][0])
+    for conn in lane.getOutgoing():
+        to = conn.getToLane()
+        if not to.allows(PASSENGER):
+            continue
+        s = to.getShape()
+        h1 = math.atan2(s[1][1] - s[0][1], s[1][0] - s[0][0])
+        turn = abs((h1 - h0 + math.pi) % (2 * math.pi) - math.pi)
+        if turn < best_turn - 1e-9:
+            best, best_turn = (conn.getViaLaneID() or "", to), turn
+    return best
+
+
+def _dedup(pts: np.ndarray) -> np.ndarray:
+    keep = np.concatenate([[True], np.hypot(*np.diff(pts, axis=0).T) > 0.05])
+    return pts[keep]
+
+
+def _resample(pts: np.ndarray, step: float) -> np.ndarray:
+    cum = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    s = np.append(np.arange(0.0, cum[-1], step), cum[-1])
+    return np.stack([np.interp(s, cum, pts[:, 0]), np.interp(s, cum, pts[:, 1])], axis=1)
+
+
+def as_path(pts: np.ndarray) -> Path:
+    """The points as an :class:`ego.planning.Path` (for locating the car and other points on it)."""
+    s = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+    return Path(pts, s, np.zeros(len(pts)))
+
+
+def predictions(obs: Observation, steps: int, dt: float, reach: float):
+    """One ``pycrcc.TimeVariantCollisionObject`` per road user within ``reach`` metres of the ego: its
+    box at time steps ``0..steps`` (``dt`` seconds apart), moving on at its current speed and heading."""
+    out = []
+    ex, ey = obs.ego.x, obs.ego.y
+    for o in obs.objects:
+        if abs(o.x - ex) > reach or abs(o.y - ey) > reach:
+            continue
+        c, s = math.cos(o.heading), math.sin(o.heading)
+        vx, vy = o.speed * c, o.speed * s
+        tvo = pycrcc.TimeVariantCollisionObject(0)
+        for k in range(steps + 1):
+            t = k * dt
+            tvo.append_obstacle(pycrcc.RectOBB(o.length / 2.0, o.width / 2.0, o.heading, o.x + vx * t, o.y + vy * t))
+        out.append(tvo)
+    return out
+
+
+def stop_wall(obs: Observation, path: Path, s_front: float) -> tuple[float, float, float] | None:
+    """(x, y, heading) of the wall's centre when the next light on the route is red, or yellow with room
+    to stop at :data:`YELLOW_DECEL`; None otherwise. ``s_front``: the front bumper's arc length on ``path``."""
+    tl = obs.traffic_light
+    if tl is None or tl.state not in "rRyYu" or tl.distance > 150.0:
+        return None
+    v = obs.ego.speed
+    if tl.state in "yY" and tl.distance < v * v / (2.0 * YELLOW_DECEL):
+        return None  # too close to stop comfortably on yellow: go
+    s_wall = s_front + tl.distance + STOP_WALL_HALF_DEPTH
+    x, y = path.point_at(s_wall)
+    x1, y1 = path.point_at(s_wall + 1.0)
+    x0, y0 = path.point_at(s_wall - 1.0)
+    return x, y, math.atan2(y1 - y0, x1 - x0)
+
+
+def wall_shape(wall: tuple[float, float, float]):
+    x, y, h = wall
+    return pycrcc.RectOBB(STOP_WALL_HALF_DEPTH, STOP_WALL_HALF_WIDTH, h, x, y)
+
+
+def stop_speed(dist: float, decel: float, margin: float = 0.0) -> float:
+    """[m/s] the speed from which the car stops ``margin`` metres short of a point ``dist`` metres ahead,
+    braking at ``decel`` [m/s^2] (0 once there)."""
+    d = dist - margin
+    return math.sqrt(2.0 * decel * d) if d > 0.0 else 0.0
