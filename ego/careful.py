@@ -26,8 +26,9 @@ perception keeps and the control the reference chose), so it follows the referen
 - it slows for low friction it knows: the road's wetness (it sees rain and a wet road), and the puddles of the
   map (option ``puddles``, which the attribution's replay fills from the scenario: the benchmark of what could
   have been done, as a local driver knows an icy bend): on ground of friction ``mu`` it drives no faster than
-  it can stop from at half its grip within :data:`GRIP_SIGHT` m, braking at :data:`FREE_DECEL_CAREFUL` before
-  the patch, and counts on ``0.8 mu g`` (at most :data:`PLANNING_DECEL`) for its stopping distance.
+  it can stop from at half its grip within :data:`GRIP_SIGHT` m, takes bends at half its grip sideways, slows
+  at :data:`FREE_DECEL_CAREFUL` before the patch, and counts on ``0.8 mu g`` (at most :data:`PLANNING_DECEL`)
+  for its stopping distance.
 
 What it cannot see: what its sensors miss (range, field of view, fog, occlusion: the reference's sensing); a
 walker's or driver's intent (it extrapolates the present heading and speed: a walker who turns, or a car that
@@ -248,11 +249,14 @@ def grip_speed(mu: float) -> float:
 
 
 def _grip_profile(path, mus: list[float]):
-    """Per path point, the highest speed [m/s] that respects :func:`grip_speed` there and, braking at
-    :data:`FREE_DECEL_CAREFUL`, at every later point; False when nothing on the path binds below 30 m/s."""
-    caps = [grip_speed(m) for m in mus]
-    if min(caps) >= 30.0:
+    """Per path point, the highest speed [m/s] that respects :func:`grip_speed` there (and, in a bend, a sideways
+    acceleration of half the grip) and, braking at :data:`FREE_DECEL_CAREFUL`, at every later point; False where
+    the friction is 0.9 or more all along (the reference's own profile does)."""
+    if min(mus) >= 0.9:  # a dry road: the reference's curvature profile and limits do
         return False
+    # in a bend, half the grip sideways: v^2 k <= 0.5 mu g
+    caps = [min(grip_speed(m), math.sqrt(0.5 * max(m, 0.02) * G / k) if k > 1e-4 else 100.0)
+            for m, k in zip(mus, path.curvature.tolist())]
     s = path._s
     prof = list(caps)
     for i in range(len(prof) - 2, -1, -1):

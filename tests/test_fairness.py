@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from drivefuzz.scenario import Actor, ActorKind, NavType
-from drivefuzz.search.fairness import unfair
+from drivefuzz.search.fairness import route_distance, unfair
 from drivefuzz.search.mutate import MutationConfig, Mutator
 
 
@@ -139,3 +139,29 @@ def test_an_actor_there_from_the_start_leaves_an_ego_entering_at_speed_room_to_s
     assert unfair(mut, sc, car(5.2, 26.0)) is None
     assert unfair(mut, sc, car(120.0, 14.6)) is None
     assert "enters 26.0 m/s faster" in unfair(mut, sc, car(60.0, 0.0, NavType.IMMOBILE))
+
+
+def test_a_walker_does_not_cross_just_behind_another_walkers_line(town, town_scenario, mut):
+    """Issue 31: the ego that stops for one jaywalker stands on the line of a second one crossing a few metres
+    before it at the same time, who walks into its side: no driver avoids that, so the second is not placed.
+    The same walker 40 m before the first, or crossing long after it, is fair."""
+    from drivefuzz.search.fairness import walks_into_stopped_ego
+
+    sc = town_scenario
+
+    def walker(aid, dist, depart):
+        spot = mut._spot_along(sc, random.Random(0), dist, "pedestrian")
+        assert spot is not None
+        return Actor(id=aid, kind=ActorKind.PEDESTRIAN, nav=NavType.LINEAR, start_lane=spot.lane, start_pos=spot.pos,
+                     speed=1.2, depart=depart, dest_xy=(spot.x, spot.y + 12.0))
+
+    first = walker("p1", 70.0, 0.0)
+    scene = sc.model_copy(update={"actors": (first,)})
+    d = lambda a: route_distance(mut, scene, a.start_lane, a.start_pos)  # noqa: E731
+    close = walker("p2", 64.0, 0.0)
+    assert "walk into the ego waiting for it" in walks_into_stopped_ego(mut, scene, close, d(close))
+    assert "walk into the ego waiting for it" in unfair(mut, scene, close)
+    assert walks_into_stopped_ego(mut, scene, walker("p3", 30.0, 0.0), d(walker("p3", 30.0, 0.0))) is None
+    late = walker("p4", 64.0, 30.0)  # on the road long after p1 has crossed
+    assert walks_into_stopped_ego(mut, scene, late, d(late)) is None
+

@@ -11,6 +11,11 @@ no driver could get out of. After every placement, position, timing or speed cha
   ego enters at speed, an actor there from the start must leave it room to shed the speed difference;
 - **walkers step out in time**: a jaywalker must reach the ego's path either after the ego has passed or
   while the ego can still stop before it (careful braking ``EGO_DECEL`` after ``REACTION``);
+- **walkers do not walk into a stopped ego** (:func:`walks_into_stopped_ego`): a jaywalker (who ignores
+  everyone) must not cross the ego's route where the ego is expected to stand while the walker is on the road
+  (waiting at a light, as the mutator's profile of the ego has it), nor just behind another jaywalker's line while that one is on the road
+  too (the ego that stops for the first, short of its line, stands on the second's: no driver avoids a walker
+  who walks into its side while it waits);
 - **cut-ins leave room**: a maneuver program's lane change or nudge is triggered by the gap or the headway to
   the ego (or by the clock, with SUMO's own safety gaps), and its gap leaves a careful driver room to react to
   the closing speed and brake (:func:`drivefuzz.scenario.model.cut_in_gap`; the executor holds back a lane
@@ -88,7 +93,7 @@ def unfair(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
     d = route_distance(mut, sc, actor.start_lane, actor.start_pos)
     if actor.kind is ActorKind.PEDESTRIAN:
         if actor.nav is NavType.LINEAR and d is not None:
-            return _jaywalker(mut, sc, actor, d)
+            return _jaywalker(mut, sc, actor, d) or walks_into_stopped_ego(mut, sc, actor, d)
         if actor.nav is NavType.IMMOBILE and d is not None and 0.0 <= d < mut.cfg.immobile_min_range:
             return f"stands {d:.1f} m ahead of the ego's start"
         if actor.nav in (NavType.IMMOBILE, NavType.AUTOPILOT) and d is not None and d > 0.0 \
@@ -225,3 +230,50 @@ def _jaywalker(mut: "Mutator", sc: Scenario, actor: Actor, d: float) -> str | No
 def lane_limit(mut: "Mutator", lane_id: str) -> float:
     """[m/s] the lane's speed limit (a floor of 5 m/s for odd networks)."""
     return max(mut.rmap.geom(lane_id).speed, 5.0) if math.isfinite(mut.rmap.geom(lane_id).speed) else 13.9
+
+
+#: [m] behind another jaywalker's line (along the ego's route) where the ego that stops for that walker stands:
+#: its standstill gap and prediction margin before the line, and its length.
+STOPPED_FOR_WALKER = 12.0
+#: [m/s] an expected speed below which the ego counts as standing (its profile's stops at lights and the goal).
+STANDING = 0.5
+
+
+def _on_road(mut: "Mutator", actor: Actor) -> tuple[float, float] | None:
+    """[s] (from, to) when the jaywalker ``actor`` is on the road lanes it crosses (None: it does not move)."""
+    lane = mut.rmap.lane(actor.start_lane)
+    lanes = lane.getEdge().getLanes()
+    road = [l for l in lanes if l.allows(PASSENGER)]
+    if not road or actor.speed <= 0.0:
+        return None
+    lo, hi = min(l.getIndex() for l in road), max(l.getIndex() for l in road)
+    between = sum(l.getWidth() for l in lanes if min(lane.getIndex(), lo) < l.getIndex() < max(lane.getIndex(), hi)
+                  and not l.allows(PASSENGER))
+    t0 = actor.depart + ((lane.getWidth() / 2 + between) / actor.speed if lane not in road else 0.0)
+    return t0, t0 + sum(l.getWidth() for l in road) / actor.speed
+
+
+def walks_into_stopped_ego(mut: "Mutator", sc: Scenario, actor: Actor, d: float) -> str | None:
+    """Why the jaywalker ``actor``, crossing the ego's route ``d`` [m] from its start, would walk into an ego that
+    stands still (None: it would not): the ego is expected to stand on its line while it crosses, or another
+    jaywalker crosses up to :data:`STOPPED_FOR_WALKER` m beyond its line while both are on the road (the ego
+    waits for that one on this one's line); and the same with ``actor`` as the one the ego waits for."""
+    window = _on_road(mut, actor)
+    if window is None:
+        return None
+    for t in np.arange(window[0], window[1] + 0.25, 0.5):
+        front, v = _ego_at(mut, sc, float(t))
+        if v < STANDING and -EGO_LENGTH - MARGIN <= d - front <= MARGIN:
+            return f"crosses at {t:.1f} s where the ego is expected to stand: it would walk into it"
+    for other in sc.actors:
+        if other.id == actor.id or other.kind is not ActorKind.PEDESTRIAN or other.nav is not NavType.LINEAR:
+            continue
+        d2 = route_distance(mut, sc, other.start_lane, other.start_pos)
+        w2 = _on_road(mut, other)
+        if d2 is None or w2 is None or w2[1] < window[0] or window[1] < w2[0]:
+            continue
+        if 0.0 < d2 - d <= STOPPED_FOR_WALKER:
+            return f"crosses {d2 - d:.1f} m before {other.id} while it crosses too: it would walk into the ego waiting for it"
+        if 0.0 < d - d2 <= STOPPED_FOR_WALKER:
+            return f"crosses {d - d2:.1f} m beyond {other.id} while it crosses too: {other.id} would walk into the ego waiting for it"
+    return None

@@ -219,6 +219,8 @@ AVOIDED: dict[str, str] = {
     "queue": "blocked_avoidable",
     "held_up": "blocked_avoidable",
 }
+#: The oracles of a standstill: an excuse of one (blocked, held up) holds when the careful driver fails either.
+STANDSTILL = frozenset({"immobility", "mission"})
 #: Evidence key of an excuse that holds without a replay (its value says why).
 KEPT = "kept_without_replay"
 
@@ -416,7 +418,9 @@ def test_excuse(scenario, trace, misbehavior, replay: Replay, verdict: Attributi
     the ego's, and its reason says what the careful driver did instead."""
     careful = careful_scenario(scenario)
     others, ctrace = replay(careful)
-    same = [m for m in others if m.oracle == misbehavior.oracle and set(m.actors) == set(misbehavior.actors)]
+    stuck = misbehavior.oracle in STANDSTILL  # held up or blocked: standing still and timing out are one failure
+    same = [m for m in others if (m.oracle in STANDSTILL if stuck else
+                                  m.oracle == misbehavior.oracle and set(m.actors) == set(misbehavior.actors))]
     evidence = dict(verdict.evidence)
     evidence["counterfactual"] = {"ads": CAREFUL_ADS, "misbehaviors": [f"{m.oracle}/{m.kind}" for m in others],
                                   "same_failure": bool(same), "excuse": verdict.rule}

@@ -1,0 +1,222 @@
+"""Does attribution file an ADS's bugs as findings? A differential check with the reference ADS's hidden faults.
+
+For each hidden fault of the reference ADS (``--faults``; ``ego/ads.py`` lists them), runs one fuzz campaign of
+the reference ADS with that fault (``FuzzConfig(max_execs=N, strategy=S, seed=SEED, ads=ego:fault=F)``, no
+reproduction reruns and no shrinking: they do not change a verdict), then re-runs every finding and incident
+on its own scenario with the clean reference ADS (the same scenario and oracle settings, ``fault=none``) and
+sorts each folder:
+
+- **differential**: the clean ADS does not fail the same way (same oracle, same other party; for an oracle that
+  names no other party, same oracle and kind), and did not fail otherwise before the event's time: the fault
+  caused it, so it should be a finding;
+- **shared**: the clean ADS fails the same way: the situation (or a bug of the clean ADS itself) caused it;
+- **clean failed first**: the clean ADS failed differently before the event's time: says nothing.
+
+and prints per fault, and over all faults:
+
+- **recall**: of the differential folders, the share filed as findings (fault ``ego`` or ``unclear``);
+- **precision**: of the findings, the share that are differential (a shared finding may still be right: the
+  clean reference ADS has bugs of its own, such as not yielding when it turns left; they are listed to read);
+- the differential incidents (misses), each with its rule and reason, and the shared findings, for reading.
+
+Counts are per folder (one per signature), with the hits (executions filed there) beside them.
+
+Usage::
+
+    python tools/eval_attribution.py [--execs 100] [--faults no_walker_prediction,short_headway,...] [--seed 0]
+                                     [--strategy all] [--network town] [--jobs 1] [--no-feedback] [--keep DIR]
+    python tools/eval_attribution.py --report DIR [DIR ...]   # re-read kept campaigns (DIR/<fault>), no fuzzing
+
+Prints only; an evaluation script, not a test.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+sys.path.insert(0, str(REPO / "tools"))
+
+from campaigns import run_campaign  # noqa: E402  (tools/, beside this script)
+
+#: The reference ADS's faults that the committed seeds do not show (ego/ads.py).
+HIDDEN_FAULTS = ("ignore_pedestrians", "late_braking", "no_fog_slowdown", "no_walker_prediction", "short_headway",
+                 "narrow_corridor")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--execs", type=int, default=100, help="executions per fault's campaign [100]")
+    ap.add_argument("--faults", default=",".join(HIDDEN_FAULTS), help="comma-separated faults [all hidden ones]")
+    ap.add_argument("--seed", type=int, default=0, help="campaign RNG seed [0]")
+    ap.add_argument("--strategy", default="all", help="mutation strategy [all]")
+    ap.add_argument("--network", default="town", help="a bundled network name [town]")
+    ap.add_argument("--jobs", type=int, default=1, help="seed jobs at once on a local Dask cluster [1]")
+    ap.add_argument("--no-feedback", action="store_true", help="successors at random (the paper's baseline)")
+    ap.add_argument("--keep", type=Path, help="keep the campaigns here (DIR/<fault>)")
+    ap.add_argument("--report", type=Path, nargs="+", help="only judge these kept campaign folders (DIR/<fault>)")
+    args = ap.parse_args(argv)
+
+    if args.report:
+        outs = [(p.name, p) for d in args.report for p in ([d] if (d / "manifest.json").exists() else
+                                                           sorted(x for x in d.iterdir() if x.is_dir()))]
+        summarise([judge_campaign(out, fault) for fault, out in outs])
+        return 0
+    faults = [f.strip() for f in args.faults.split(",") if f.strip()]
+    tmp = None
+    base = args.keep
+    if base is None:
+        tmp = tempfile.mkdtemp(prefix="eval-attribution-")
+        base = Path(tmp)
+    try:
+        rows = []
+        for fault in faults:
+            out = base / fault
+            if out.exists() and any(out.iterdir()):
+                sys.exit(f"{out} exists and is not empty: give another --keep, or remove it")
+            t0 = time.perf_counter()
+            run_fault(out, fault, args)
+            row = judge_campaign(out, fault)
+            row["wall_s"] = time.perf_counter() - t0
+            rows.append(row)
+            print_fault(row)
+        summarise(rows)
+    finally:
+        if tmp:
+            shutil.rmtree(tmp, ignore_errors=True)
+    return 0
+
+
+def run_fault(out: Path, fault: str, args) -> float:
+    from drivefuzz.campaign.fuzz import FuzzConfig
+    from drivefuzz.scenario import AdsSpec
+    from drivefuzz.scenario.seed import list_seeds
+    from drivefuzz.scenario.sumofiles import load_scenario
+
+    net = REPO / "networks" / f"{args.network}.net.xml"
+    seeds = []
+    for p in list_seeds(REPO / "seeds" / args.network):
+        sc = load_scenario(p)
+        seeds.append(sc.model_copy(update={"network": str(net.resolve())}))
+    cfg = FuzzConfig(max_execs=args.execs, strategy=args.strategy, seed=args.seed, reproduce=0, shrink=0,
+                     continue_after_finding=True, feedback="random" if args.no_feedback else "risk",
+                     ads=AdsSpec(name="ego", options={"fault": fault}))
+    argv = ["tools/eval_attribution.py", "--execs", str(args.execs), "--faults", fault, "--seed", str(args.seed),
+            "--strategy", args.strategy]
+    print(f"running: fault {fault}, {args.execs} executions, {len(seeds)} seeds of {net.name}, seed {args.seed}"
+          f"{', no feedback' if args.no_feedback else ''} -> {out}", file=sys.stderr, flush=True)
+    return run_campaign(out, seeds, cfg, argv, args.jobs)
+
+
+# ------------------------------------------------------------------------------ judging a campaign
+def _same(m, mb) -> bool:
+    if m.oracle != mb.oracle:
+        return False
+    if mb.actors or m.actors:
+        return set(m.actors) == set(mb.actors)
+    return m.kind == mb.kind
+
+
+def clean_outcome(folder: Path, verdict: dict[str, Any]) -> str:
+    """``differential``, ``shared`` or ``clean_failed_first``: the folder's scenario re-run with the clean
+    reference ADS (its other options kept), under the campaign's oracle settings."""
+    from drivefuzz.oracle import Misbehavior, OracleSettings
+    from drivefuzz.scenario import AdsSpec
+    from drivefuzz.scenario.sumofiles import load_scenario
+    from drivefuzz.sim.execute import execute
+
+    sc = load_scenario(folder)
+    options = {k: v for k, v in sc.ads.options.items() if k != "fault"}
+    clean = sc.model_copy(update={"ads": AdsSpec(name="ego", options=options)})
+    mb = Misbehavior.from_dict(verdict["misbehaviors"][0])
+    ex = execute(clean, oracles=OracleSettings(settings=verdict.get("oracles") or {}).instantiate())
+    if any(_same(m, mb) for m in ex.misbehaviors):
+        return "shared"
+    if any(m.time < mb.time - 1e-6 for m in ex.misbehaviors):
+        return "clean_failed_first"
+    return "differential"
+
+
+def judge_campaign(out: Path, fault: str) -> dict[str, Any]:
+    """Every finding and incident folder of the campaign ``out``, sorted by :func:`clean_outcome`."""
+    import sqlite3
+
+    rows = []
+    for sub in ("findings", "incidents"):
+        for vpath in sorted((out / sub).glob("*/verdict.json")):
+            verdict = json.loads(vpath.read_text())
+            if not (vpath.parent / "trace").is_dir():  # a crash or hang: nothing to re-run
+                continue
+            hits = vpath.parent / "hits.json"
+            n_hits = len(json.loads(hits.read_text())) if hits.exists() else 1
+            att = verdict.get("attribution") or {}
+            mb = verdict["misbehaviors"][0]
+            rows.append({"folder": f"{sub}/{vpath.parent.name}", "finding": sub == "findings", "hits": n_hits,
+                         "fault": att.get("fault"), "rule": att.get("rule"), "reason": att.get("reason"),
+                         "event": f"{mb['oracle']}/{mb['kind']}", "clean": clean_outcome(vpath.parent, verdict)})
+    execs = 0
+    db = out / "index.sqlite"
+    if db.exists():
+        with sqlite3.connect(db) as con:
+            execs = con.execute("select count(*) from executions").fetchone()[0]
+    return {"fault": fault, "out": str(out), "execs": execs, "folders": rows}
+
+
+def _counts(rows: list[dict[str, Any]]) -> dict[str, Any]:
+    diff = [r for r in rows if r["clean"] == "differential"]
+    findings = [r for r in rows if r["finding"]]
+    caught = [r for r in diff if r["finding"]]
+    true_findings = [r for r in findings if r["clean"] == "differential"]
+    return {
+        "folders": len(rows), "findings": len(findings), "incidents": len(rows) - len(findings),
+        "differential": len(diff), "caught": len(caught),
+        "recall": len(caught) / len(diff) if diff else None,
+        "precision": len(true_findings) / len(findings) if findings else None,
+        "differential_hits": sum(r["hits"] for r in diff), "caught_hits": sum(r["hits"] for r in caught),
+        "shared": sum(r["clean"] == "shared" for r in rows),
+        "first": sum(r["clean"] == "clean_failed_first" for r in rows),
+    }
+
+
+def _pct(x) -> str:
+    return "   -" if x is None else f"{100 * x:3.0f}%"
+
+
+def print_fault(row: dict[str, Any]) -> None:
+    c = _counts(row["folders"])
+    wall = f", {row['wall_s']:.0f} s" if "wall_s" in row else ""
+    print(f"\n== {row['fault']}: {row['execs']} executions{wall}; {c['findings']} findings, {c['incidents']} incidents "
+          f"(folders); clean ADS: {c['differential']} avoided, {c['shared']} shared, {c['first']} failed first")
+    print(f"   recall {_pct(c['recall'])} ({c['caught']}/{c['differential']} folders, "
+          f"{c['caught_hits']}/{c['differential_hits']} hits)   precision {_pct(c['precision'])}")
+    for r in row["folders"]:
+        if r["clean"] == "differential" and not r["finding"]:
+            print(f"   MISS {r['folder']} [{r['event']}, rule {r['rule']}, {r['hits']} hit(s)]: {r['reason']}")
+    for r in row["folders"]:
+        if r["finding"] and r["clean"] == "shared":
+            print(f"   SHARED FINDING {r['folder']} [{r['event']}, rule {r['rule']}]: {r['reason']}")
+
+
+def summarise(rows: list[dict[str, Any]]) -> None:
+    print("\nfault                    execs findings incidents differential caught recall precision")
+    every = []
+    for row in rows:
+        c = _counts(row["folders"])
+        every += row["folders"]
+        print(f"{row['fault']:<24} {row['execs']:>5} {c['findings']:>8} {c['incidents']:>9} {c['differential']:>12} "
+              f"{c['caught']:>6} {_pct(c['recall']):>6} {_pct(c['precision']):>9}")
+    c = _counts(every)
+    print(f"{'all':<24} {sum(r['execs'] for r in rows):>5} {c['findings']:>8} {c['incidents']:>9} "
+          f"{c['differential']:>12} {c['caught']:>6} {_pct(c['recall']):>6} {_pct(c['precision']):>9}")
+
+
+if __name__ == "__main__":
+    sys.exit(main())
