@@ -146,6 +146,11 @@ class ADS(abc.ABC):
         """True once the ADS believes its mission is complete (used by the mission oracle)."""
         return False
 
+    def trace_info(self) -> Mapping[str, Any] | None:
+        """What the ADS wants kept with the trace (``meta.json``, key ``ads_info``; JSON-able): its
+        decisions, for a person reading a finding. Called once, after the last step; None: nothing."""
+        return None
+
     # An ADS that lets SUMO drive the ego (like the ``sumo`` plugin) overrides this to True;
     # the executor then does not move the car and reads its state from SUMO instead.
     sumo_driven: ClassVar[bool] = False

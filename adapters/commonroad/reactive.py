@@ -30,20 +30,24 @@ planner as installed. docs/bugs/commonroad-reactive-planner.md, bug 1.
 from __future__ import annotations
 
 import logging
+import warnings
 
 import numpy as np
-from commonroad.common.util import Interval
-from commonroad_clcs.config import CLCSParams, ProcessingOption
-from commonroad_clcs.pycrccosy import (CurvilinearProjectionDomainLateralError,
-                                       CurvilinearProjectionDomainLongitudinalError)
-from commonroad.planning.goal import GoalRegion
-from commonroad.planning.planning_problem import PlanningProblem
-from commonroad.scenario.scenario import Scenario
-from commonroad.scenario.state import CustomState, InitialState
-from commonroad_rp.reactive_planner import ReactivePlanner
-from commonroad_rp.state import ReactivePlannerState
-from commonroad_rp.utility.config import ReactivePlannerConfiguration
-from commonroad_rp.utility.utils_coordinate_system import CoordinateSystem
+
+with warnings.catch_warnings():  # commonroad-io's generated protobuf code and the route planner warn on import
+    warnings.simplefilter("ignore", DeprecationWarning)
+    from commonroad.common.util import Interval
+    from commonroad_clcs.config import CLCSParams, ProcessingOption
+    from commonroad_clcs.pycrccosy import (CurvilinearProjectionDomainLateralError,
+                                           CurvilinearProjectionDomainLongitudinalError)
+    from commonroad.planning.goal import GoalRegion
+    from commonroad.planning.planning_problem import PlanningProblem
+    from commonroad.scenario.scenario import Scenario
+    from commonroad.scenario.state import CustomState, InitialState
+    from commonroad_rp.reactive_planner import ReactivePlanner
+    from commonroad_rp.state import ReactivePlannerState
+    from commonroad_rp.utility.config import ReactivePlannerConfiguration
+    from commonroad_rp.utility.utils_coordinate_system import CoordinateSystem
 
 from drivefuzz.sim.physics import VehicleParams
 

@@ -579,12 +579,17 @@ class _Run:
         perf = time.perf_counter
         params, timings, misbehaviors = self.params, self.timings, self.misbehaviors
         t_end = perf()
-        trace = self.recorder.freeze({
+        meta = {
             "step_length": self.dt, "ego_length": params.length, "ego_width": params.width,
             "wheelbase": params.wheelbase, "steering_ratio": params.steering_ratio,
             "scenario_hash": self.scenario.content_hash(), "termination": termination.value,
             "goal_xy": [self.gx, self.gy], "route": list(self.planned), "drivefuzz": drivefuzz.__version__,
-        })
+        }
+        with _blame("ADS", self.ads_name, "at the end of the run"):
+            ads_info = self.ads.trace_info()
+        if ads_info is not None:  # an ADS's own record of its decisions (adapters: every planning cycle)
+            meta["ads_info"] = ads_info
+        trace = self.recorder.freeze(meta)
         timings["record"] += perf() - t_end
         t_end = perf()
         for oracle, name in zip(self.oracles, self.oracle_names):

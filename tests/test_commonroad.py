@@ -1,0 +1,179 @@
+"""The CommonRoad adapter (adapters/commonroad) and TUM's reactive planner behind it, on real SUMO runs.
+
+Skipped, with the reason, where the ``commonroad`` extra is not installed (``pip install -e ".[commonroad]"``;
+CI installs it). The planner costs about 100x the reference ADS, so the runs here are short.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("commonroad_rp", reason="the commonroad extra is not installed: pip install -e '.[commonroad]'")
+
+from drivefuzz.ads import EgoState, MissionInfo, Observation, TrafficLightState, load_ads  # noqa: E402
+from drivefuzz.oracle import OracleSettings  # noqa: E402
+from drivefuzz.scenario.sumofiles import load_scenario  # noqa: E402
+from drivefuzz.sim.execute import execute  # noqa: E402
+
+from adapters.commonroad import scene  # noqa: E402
+from adapters.commonroad.base import NO_PLAN, PLANNED, RAISED  # noqa: E402
+from adapters.commonroad.reactive import ReactivePlannerADS  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+#: the shortest committed seed the planner drives clean (about 5 s of wall time)
+SHORT_SEED = ROOT / "seeds" / "intersection" / "001"
+
+
+def _obs(x=0.0, v=10.0, light=None) -> Observation:
+    ego = EgoState(x, 0.0, 0.0, v, v, 0.0, 0.0, 0.0, 0.0, 4.6, 1.9, 2.8)
+    return Observation(0.0, ego, "L_0", 10.0, 13.9, (), light, None)
+
+
+def _straight():
+    return scene.as_path(np.stack([np.arange(0.0, 200.0), np.zeros(200)], axis=1))
+
+
+# -- the stop-line wall --------------------------------------------------------------------------------------
+def test_a_red_light_puts_a_wall_across_the_road_just_past_its_stop_line():
+    path = _straight()
+    wall = scene.stop_wall(_obs(light=TrafficLightState("J", 0, 30.0, "r")), path, s_front=12.3)
+    assert wall is not None
+    x, y, h = wall
+    assert x == pytest.approx(12.3 + 30.0 + scene.STOP_WALL_HALF_DEPTH) and y == pytest.approx(0.0)
+    assert h == pytest.approx(0.0)
+    # the wall is a box as wide as the planner's lateral samples and the car: a sample 3 m aside still meets it
+    car_beside = scene.pycrcc.RectOBB(2.3, 0.95, 0.0, x, 3.0)
+    assert scene.wall_shape(wall).collide(car_beside)
+    assert not scene.wall_shape(wall).collide(scene.pycrcc.RectOBB(2.3, 0.95, 0.0, x - 3.5, 0.0))
+
+
+@pytest.mark.parametrize("state, distance, speed, expected", [
+    ("G", 30.0, 10.0, False),  # green: no wall
+    ("y", 30.0, 10.0, True),  # yellow with room to stop (10^2 / 8 = 12.5 m < 30 m)
+    ("y", 10.0, 10.0, False),  # yellow, too close to stop comfortably: go
+    ("r", 10.0, 10.0, True),  # red: always
+    ("r", 200.0, 10.0, False),  # too far to matter yet
+])
+def test_the_wall_follows_the_light_state(state, distance, speed, expected):
+    obs = _obs(v=speed, light=TrafficLightState("J", 0, distance, state))
+    assert (scene.stop_wall(obs, _straight(), 0.0) is not None) is expected
+
+
+def test_no_light_no_wall():
+    assert scene.stop_wall(_obs(), _straight(), 0.0) is None
+
+
+# -- the reference path and the road boundary -----------------------------------------------------------------
+@pytest.mark.parametrize("seed", ["town/000", "highway/000", "roundabout/000"])
+def test_the_reference_path_reaches_well_past_the_goal_and_the_planner_frame_covers_it(seed):
+    from commonroad_clcs.config import CLCSParams, ProcessingOption
+    from commonroad_rp.utility.utils_coordinate_system import CoordinateSystem
+    from drivefuzz.scenario.roadmap import load_roadmap
+
+    sc = load_scenario(ROOT / "seeds" / seed)
+    m = sc.mission
+    rmap = load_roadmap(sc.network_path())
+    pts = scene.reference_path(rmap, rmap.route(m.start_edge, m.goal_edge), m.start_lane, m.start_pos,
+                               m.goal_edge, m.goal_pos)
+    path = scene.as_path(pts)
+    gx, gy, _ = rmap.geom(rmap.drive_lane(m.goal_edge)).position(m.goal_pos)
+    _, s_goal, lat = path.locate(gx, gy, hint=0, window=len(pts))
+    assert abs(lat) < 4.0  # the goal is beside the path (on one of the goal edge's lanes)
+    assert path.s[-1] - s_goal >= scene.PAST_GOAL - 1.0
+    # the planner's own frame (as the adapter builds it, without the shim) reaches past the goal by the
+    # longest horizon at town speeds: samples there no longer raise
+    co = CoordinateSystem(pts, clcs_params=CLCSParams(processing_option=ProcessingOption.CURVE_SUBDIVISION))
+    s_cl, _ = co.convert_to_curvilinear_coords(gx, gy)
+    assert co.convert_to_cartesian_coords(s_cl + 60.0, 0.0) is not None
+    # and the car at its start lies on the road, clear of the boundary
+    x, y, h = rmap.geom(m.start_lane).position(m.start_pos)
+    group, n = scene.boundary_group(scene.boundary_segments(rmap), pts)
+    assert n > 0
+    car = scene.pycrcc.RectOBB(2.3, 0.95, h, x - 2.3 * math.cos(h), y - 2.3 * math.sin(h))
+    assert not group.collide(car)
+
+
+def test_the_road_boundary_is_computed_once_per_network(town):
+    assert scene.boundary_segments(town) is scene.boundary_segments(town)
+
+
+# -- the fail-safe ----------------------------------------------------------------------------------------------
+class _RaisesAfterOneSecond(ReactivePlannerADS):
+    def plan(self, state, checker, desired_speed):
+        if self.k * self.mission.step_length >= 1.0:
+            raise RuntimeError("planner exploded")
+        return super().plan(state, checker, desired_speed)
+
+
+class _NeverPlans(ReactivePlannerADS):
+    def plan(self, state, checker, desired_speed):
+        return None
+
+
+def _short(town_scenario, limit):
+    return town_scenario.model_copy(update={"sim": town_scenario.sim.model_copy(update={"time_limit": limit})})
+
+
+def test_a_planner_that_raises_is_an_ads_failure_the_fail_safe_brakes_and_the_trace_says_so(town_scenario):
+    ex = execute(_short(town_scenario, 4.0), ads=_RaisesAfterOneSecond({}), oracles=[])
+    info = ex.trace.meta["ads_info"]
+    cycles = info["cycles"]
+    assert info["counts"][PLANNED] >= 3 and info["counts"][RAISED] >= 5
+    first = cycles["outcome"].index(RAISED)
+    assert cycles["t"][first] >= 1.0 and "RuntimeError: planner exploded" in cycles["error"][first]
+    speed, t = ex.trace["speed"], ex.trace["t"]
+    at_raise = speed[np.searchsorted(t, cycles["t"][first])]
+    assert at_raise > 1.0  # it had started
+    assert speed[-1] < 0.05 and speed[-1] < at_raise  # and then it braked to a stop, and stayed
+
+
+def test_a_planner_that_returns_nothing_leaves_the_car_braking_at_rest(town_scenario):
+    ex = execute(_short(town_scenario, 2.0), ads=_NeverPlans({}), oracles=[])
+    info = ex.trace.meta["ads_info"]
+    assert set(info["cycles"]["outcome"]) == {NO_PLAN}
+    assert float(np.max(ex.trace["speed"])) < 0.05
+    assert float(np.max(ex.trace["throttle"])) == 0.0
+
+
+def test_the_options_are_validated():
+    from drivefuzz.errors import InvalidConfig
+
+    with pytest.raises(InvalidConfig, match="replan_period"):
+        load_ads("commonroad-reactive", {"replan_period": 0})
+    ads = load_ads("commonroad-reactive", {"replan_period": 0.5, "horizon": 2.0})
+    assert ads.options.horizon == 2.0
+
+
+# -- the real planner, end to end ---------------------------------------------------------------------------------
+def _trace_cols(trace):
+    return {k: np.asarray(trace[k]) for k in ("x", "y", "heading", "speed")}
+
+
+def test_a_short_seed_drives_clean_and_the_same_in_another_process(tmp_path):
+    sc = load_scenario(SHORT_SEED)
+    ex = execute(sc, ads=load_ads("commonroad-reactive"), oracles=OracleSettings().instantiate())
+    assert ex.termination.value == "goal_reached" and not ex.misbehaviors
+    info = ex.trace.meta["ads_info"]
+    assert info["counts"][PLANNED] > 0 and info["counts"][RAISED] == 0
+
+    env = dict(os.environ)
+    out = tmp_path / "trace"
+    proc = subprocess.run([sys.executable, "-m", "drivefuzz.cli", "run", str(SHORT_SEED), "--ads", "commonroad-reactive",
+                           "--trace", str(out)], capture_output=True, text=True, env=env, timeout=240)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "goal_reached" in proc.stdout
+    from drivefuzz.sim.trace import Trace
+
+    other = Trace.load(out)
+    assert json.loads((out / "meta.json").read_text())["ads_info"] == json.loads(json.dumps(info))
+    mine, theirs = _trace_cols(ex.trace), _trace_cols(other)
+    for k in mine:
+        np.testing.assert_array_equal(mine[k], theirs[k], err_msg=k)
