@@ -1,6 +1,6 @@
 """Where a fuzzing campaign's time goes, like the paper's fuzzing-overhead figure (f:perf).
 
-Runs a short campaign on the bundled town seeds (real SUMO, the reference ADS), then reads the
+Runs a short campaign on the bundled town seeds (real SUMO, the reference ADS or ``--ads``), then reads the
 per-execution ``timings`` column of the campaign's ``index.sqlite`` and prints, per stage, the
 total time, the mean per execution and the share of the campaign's wall-clock time; then the
 executions per hour and drivefuzz's own share of the time.
@@ -28,6 +28,7 @@ The paper's figure: 150 s per execution, 94 % of it in the simulator, 6 % in Dri
 Usage::
 
     python tools/bench_fuzz.py [--execs 60] [--strategy all] [--seed 0] [--seeds 4] [--population 4] [--out DIR]
+                               [--ads NAME [--ads-option K=V]]   (e.g. --ads commonroad-reactive)
 
 Prints only; a benchmark, not a test.
 """
@@ -75,9 +76,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--population", type=int, default=4)
     ap.add_argument("--reproduce", type=int, default=5, help="reruns of each new signature [5]")
     ap.add_argument("--out", type=Path, help="keep the campaign directory here (default: a temporary one)")
+    ap.add_argument("--ads", default="ego", help="the ADS under test [ego]; e.g. commonroad-reactive (its extra)")
+    ap.add_argument("--ads-option", action="append", default=[], metavar="K=V", help="an option of that ADS")
     args = ap.parse_args(argv)
 
     from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
+    from drivefuzz.cli import parse_kv
+    from drivefuzz.scenario.model import AdsSpec
     from drivefuzz.scenario.seed import list_seeds
     from drivefuzz.scenario.sumofiles import read_scenario
 
@@ -85,7 +90,8 @@ def main(argv: list[str] | None = None) -> int:
     # spread the executions over the seeds: each seed's job gets about the same share
     cycles = -(-args.execs // (len(seeds) * args.population))
     cfg = FuzzConfig(cycles=cycles, population=args.population, strategy=args.strategy, seed=args.seed,
-                     max_execs=args.execs, continue_after_finding=True, reproduce=args.reproduce)
+                     max_execs=args.execs, continue_after_finding=True, reproduce=args.reproduce,
+                     ads=AdsSpec(name=args.ads, options=parse_kv(args.ads_option, "--ads-option")))
     tmp = None
     out = args.out
     if out is None:
@@ -122,7 +128,7 @@ def report(index: Path, total: float, args, cfg) -> None:
     retries = [r[1] or 0 for r in rows]
     findings = sum(1 for r in rows if r[3] != "pass")
 
-    print(f"campaign: {n} executions on {min(args.seeds, 40)} town seed(s), strategy {cfg.strategy}, "
+    print(f"campaign: {n} executions of ADS {cfg.ads.name} on {min(args.seeds, 40)} town seed(s), strategy {cfg.strategy}, "
           f"seed {cfg.seed}, {cfg.cycles} cycles x {cfg.population}, continue after finding; "
           f"{findings} execution(s) with a finding")
     print(f"simulated: {frames} frames ({frames * 0.05:.0f} s at 50 ms), {frames / n:.0f} frames per execution")
