@@ -592,7 +592,7 @@ def _seeds_for(network: str, seeds_dir: str | None, count: int = 4, seeds_root: 
     """
     from drivefuzz.scenario.seed import generate_seeds, list_seeds
     from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
-    from drivefuzz.scenario.validate import load_network, require_car_roads
+    from drivefuzz.scenario.validate import load_network, require_car_roads, validate
 
     rmap = load_network(network)
     folder = _seed_folder(Path(network), rmap.name, seeds_dir, seeds_root)
@@ -604,7 +604,9 @@ def _seeds_for(network: str, seeds_dir: str | None, count: int = 4, seeds_root: 
         for p in found:
             sc = load_scenario(p)
             if Path(sc.network).resolve() != Path(network).resolve():
+                # a seed written for another file: it must fit this network (seeds of another city do not)
                 sc = sc.model_copy(update={"network": str(Path(network).resolve())})
+                validate(sc, rmap, str(p / "scenario.json"))
             _check_runnable(sc, str(p / "scenario.json"))
             seeds.append(sc)
         return seeds

@@ -329,24 +329,16 @@ class NetIndex:
 
 def _junction_areas(net):
     """(drivable junction area, walking areas) of a sumolib network, each None where there is none."""
-    from shapely.geometry import LineString, Polygon
+    from shapely.geometry import LineString
     from shapely.ops import unary_union
 
     junctions, walks = [], []
-
-    def area(shape):
-        """The shape as a valid polygon, or None where it has no area."""
-        if len(shape) < 3:
-            return None
-        poly = Polygon([(p[0], p[1]) for p in shape]).buffer(0)
-        return poly if poly.area > 0 else None
-
-    junctions.extend(filter(None, (area(node.getShape()) for node in net.getNodes())))
+    junctions.extend(filter(None, (shape_area(node.getShape()) for node in net.getNodes())))
     car_lanes = []
     for e in net.getEdges(withInternal=True):
         func = e.getFunction()
         if func == "walkingarea":
-            walks.extend(filter(None, (area(ln.getShape()) for ln in e.getLanes())))
+            walks.extend(filter(None, (shape_area(ln.getShape()) for ln in e.getLanes())))
         elif func == "internal":
             # junction lanes for cars: drivable even where the junction shape is small
             for ln in e.getLanes():
@@ -365,6 +357,29 @@ def _junction_areas(net):
     if junctions or car_lanes:
         drivable = unary_union(junctions + car_lanes)
     return drivable, walk
+
+
+def shape_area(shape):
+    """A SUMO shape (a junction's, a walking area's) as a valid polygon, or None where it has no area."""
+    import shapely
+    from shapely.geometry import Polygon
+
+    if len(shape) < 3:
+        return None
+    poly = Polygon([(p[0], p[1]) for p in shape]).buffer(0)
+    if not poly.is_valid:  # buffer(0) can leave a self-intersection (a walking area of SUMO's Lübeck port)
+        poly = _polygonal(shapely.make_valid(poly))
+    return poly if poly is not None and poly.area > 0 else None
+
+
+def _polygonal(geom):
+    """The polygons of a geometry (make_valid may return lines and points beside them), or None."""
+    from shapely.geometry import MultiPolygon, Polygon
+
+    if isinstance(geom, (Polygon, MultiPolygon)):
+        return geom
+    parts = [g for g in getattr(geom, "geoms", ()) if isinstance(g, (Polygon, MultiPolygon))]
+    return MultiPolygon([q for g in parts for q in (g.geoms if isinstance(g, MultiPolygon) else [g])]) if parts else None
 
 
 def _load_geoms(key: str, names: tuple[str, ...]) -> tuple | None:

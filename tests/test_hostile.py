@@ -647,3 +647,30 @@ def test_a_network_without_car_roads_is_refused_for_what_it_is(tmp_path):
     net = bad_network(tmp_path, NETWORK_MUTATIONS["no-car-roads"])
     line = assert_one_line(invoke(["seed", net, "-n", "1", "-o", tmp_path / "s"], cwd=tmp_path), "bad.net.xml")
     assert "no road a passenger car may use" in line and "rail" in line, line
+
+
+def test_a_bicycle_lane_connected_to_the_next_road_is_not_a_lane_for_cars(tmp_path):
+    """Ingolstadt (SUMO's wheel): a bicycle lane has connections to the next edge like the car lanes; the
+    mutator took it for the lane the ego drives and placed a car on it, which SUMO refused, and the campaign
+    ended in exit 2 naming a scenario of its own making."""
+    from drivefuzz.scenario.roadmap import RoadMap
+
+    net = tmp_path / "bikes.net.xml"
+    text = TOWN.read_text()
+    new = re.sub(r'(<lane id="A0A1_1" index="1" )(?:dis)?allow="[^"]*"', r'\1allow="bicycle"', text)
+    if new == text:  # no allow/disallow on that lane
+        new = text.replace('<lane id="A0A1_1" index="1" ', '<lane id="A0A1_1" index="1" allow="bicycle" ')
+    assert new != text
+    net.write_text(new)
+    rmap = RoadMap(net)
+    from_lanes = {fl for fl, _tl, _via in rmap.connections("A0A1", "A1B1")}
+    assert from_lanes == {"A0A1_2"}, from_lanes
+    assert "A0A1_1" in {fl for fl, _tl, _via in rmap.connections("A0A1", "A1B1", "bicycle")}
+
+
+def test_seeds_of_another_network_are_refused_in_one_line(tmp_path):
+    """`fuzz NET --seeds DIR` with seeds written for another network: they were re-pointed to NET unchecked,
+    and the first look-up of their lanes ended in a KeyError traceback."""
+    r = invoke(["fuzz", SMALL_NET, "--seeds", SEEDS, "--max-execs", "1", "-o", tmp_path / "o"], cwd=tmp_path)
+    line = assert_one_line(r, "scenario.json")
+    assert "unknown lane" in line and SMALL_NET.name in line, line

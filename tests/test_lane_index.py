@@ -209,3 +209,17 @@ def test_no_key_no_cache(tmp_path, monkeypatch):
     monkeypatch.setenv("DRIVEFUZZ_CACHE", str(tmp_path))
     assert netcache.entry_key(tmp_path / "gone.net.xml", netcache.__file__, "x") is None
     assert not netcache.store(None, {"a": np.zeros(1)}) and netcache.load(None) is None
+
+
+def test_a_walking_area_that_buffer_0_leaves_invalid_is_made_valid():
+    """SUMO's Lübeck port network (DLR-TS/sumo-scenarios) has a walking area whose shape is five nearly
+    collinear points: GEOS's buffer(0) turns it into a self-intersecting polygon, and the union of the walking
+    areas then raised a TopologyException at the lane-invasion oracle's reset (exit 3 for a network SUMO runs)."""
+    import shapely
+
+    from oracles.lane_index import shape_area
+
+    shape = [(11136.38, 8313.08), (11134.45, 8312.57), (11131.35, 8311.76), (11128.26, 8310.95), (11126.32, 8310.44)]
+    assert not shapely.Polygon(shape).buffer(0).is_valid  # the GEOS behaviour this guards against
+    poly = shape_area(shape)
+    assert poly is None or poly.is_valid  # valid geometry is what GEOS's overlays require of their input

@@ -272,11 +272,14 @@ class RoadMap:
         last = self.edge(edges[-1]).getLength()
         return total - start_pos - (last - (last if end_pos is None else end_pos))
 
-    def connections(self, from_edge: str, to_edge: str) -> list[tuple[str, str, str]]:
-        """(from lane, to lane, via internal lane or '') for every connection from_edge -> to_edge."""
+    def connections(self, from_edge: str, to_edge: str, vclass: str = PASSENGER) -> list[tuple[str, str, str]]:
+        """(from lane, to lane, via internal lane or '') for every connection from_edge -> to_edge that
+        ``vclass`` may use: a city's bicycle lane is connected to the next edge's too (Ingolstadt)."""
         out = []
         src, dst = self.edge(from_edge), self.edge(to_edge)
         for conn in src.getConnections(dst):
+            if not (conn.getFromLane().allows(vclass) and conn.getToLane().allows(vclass)):
+                continue
             via = conn.getViaLaneID() or ""
             out.append((conn.getFromLane().getID(), conn.getToLane().getID(), via))
         return out
