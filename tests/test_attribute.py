@@ -343,6 +343,47 @@ def test_a_car_that_enters_the_ring_without_yielding_is_at_fault(tmp_path):
     assert v.rule == "other_failed_to_yield" and v.as_dict()["rule"] == v.rule
 
 
+def _careful_replay(sc):
+    from drivefuzz.oracle import OracleSettings
+
+    ex = execute(sc, oracles=OracleSettings().instantiate())
+    return ex.misbehaviors, ex.trace
+
+
+def test_a_car_that_enters_the_ring_without_yielding_is_kept_clear_of_by_a_careful_driver(tmp_path):
+    """The same case with the excuse tested (issue 31; before, other_failed_to_yield decided ``other`` and no
+    replay ran): the careful driver comes round the ring slower (4.9 m/s where the ego drove 7 m/s), meets v1
+    at its entry and keeps 3 m clear of it. v1 did not yield, but a careful driver would not have been struck:
+    the ego's, under right_of_way_avoidable."""
+    net = Path(NET).with_name("roundabout.net.xml")
+    sc, ex = kept_case(tmp_path, "ring_entry_fails_to_yield", str(net))
+    m = ex.misbehaviors[0]
+    v = attribute(sc, ex.trace, m, load_roadmap(net), replay=_careful_replay)
+    assert v.fault is Fault.EGO and v.rule == "right_of_way_avoidable", v.reason
+    cf = v.evidence["counterfactual"]
+    assert cf["excuse"] == "other_failed_to_yield" and not cf["same_failure"]
+    assert 3.0 < cf["careful_closest"] <= 15.0  # it met v1, and kept clear
+    assert v.reason.startswith("the vehicle v1 came from Nin_0, a link that must yield") and "a careful driver avoided it" in v.reason
+
+
+@pytest.mark.parametrize("name, rule, same, says", [
+    ("stuck_mid_turn_behind_a_queue", "blocked", True, "a careful driver could not avoid it either"),
+    ("stalled_across_two_lanes", "blocked", True, "a careful driver could not avoid it either"),
+    ("cut_in_then_brakes", "cut_in", False, "the careful driver's replay says nothing (it never came near the place)"),
+])
+def test_an_excuse_holds_when_the_careful_driver_fails_too_or_says_nothing(tmp_path, name, rule, same, says):
+    """The twins: the careful driver's replay is blocked by the same stationary bodies (the same failure), or
+    never comes near the place of v3's cut-in (it meets a jaywalker and stays back: its replay says nothing
+    about the cut-in): the excuse holds, and the reason says which."""
+    stem = json.loads((Path(__file__).parent / "data" / name / "scenario.json").read_text())["network"].split(".")[0]
+    net = Path(NET).with_name(f"{stem}.net.xml")
+    sc, ex = kept_case(tmp_path, name, str(net))
+    m = ex.misbehaviors[0]
+    v = attribute(sc, ex.trace, m, load_roadmap(net), replay=_careful_replay)
+    assert v.fault is Fault.OTHER and v.rule == rule, v.reason
+    assert v.evidence["counterfactual"]["same_failure"] is same and says in v.reason, v.reason
+
+
 def test_following_a_slow_car_round_the_ring_is_being_held_up(tmp_path):
     """A campaign's finding, kept as data (tests/data/held_up_on_the_ring): the ego follows v1, which drives
     round the one-lane ring at 1.5 m/s, 9 m ahead, for 70 s, and times out. On the ring's 27 m radius v1 stood

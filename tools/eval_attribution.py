@@ -15,8 +15,10 @@ sorts each folder:
 and prints per fault, and over all faults:
 
 - **recall**: of the differential folders, the share filed as findings (fault ``ego`` or ``unclear``);
-- **precision**: of the findings, the share that are differential (a shared finding may still be right: the
-  clean reference ADS has bugs of its own, such as not yielding when it turns left; they are listed to read);
+- **precision**: of the findings, the share that are differential; and **precision (confirmed)**: the share
+  that are differential or confirmed by the verdict itself, which a shared finding may be, since the clean
+  reference ADS has bugs of its own (it does not yield when it turns left): a rule saw the ego's own fault
+  (:data:`DECIDED`), or the careful driver's replay avoided it. Shared findings are listed to read;
 - the differential incidents (misses), each with its rule and reason, and the shared findings, for reading.
 
 Counts are per folder (one per signature), with the hits (executions filed there) beside them.
@@ -47,6 +49,8 @@ sys.path.insert(0, str(REPO / "tools"))
 
 from campaigns import run_campaign  # noqa: E402  (tools/, beside this script)
 
+#: Rules that see the ego's own fault on the trace (drivefuzz/triage/attribute.py: no replay needed).
+DECIDED = frozenset({"failed_to_yield", "ran_red", "lane_change_into", "stayed_behind", "stood_still", "obstacle"})
 #: The reference ADS's faults that the committed seeds do not show (ego/ads.py).
 HIDDEN_FAULTS = ("ignore_pedestrians", "late_braking", "no_fog_slowdown", "no_walker_prediction", "short_headway",
                  "narrow_corridor")
@@ -159,9 +163,12 @@ def judge_campaign(out: Path, fault: str) -> dict[str, Any]:
             n_hits = len(json.loads(hits.read_text())) if hits.exists() else 1
             att = verdict.get("attribution") or {}
             mb = verdict["misbehaviors"][0]
+            cf = (att.get("evidence") or {}).get("counterfactual") or {}
+            confirmed = att.get("rule") in DECIDED or (att.get("fault") == "ego" and cf and not cf.get("same_failure"))
             rows.append({"folder": f"{sub}/{vpath.parent.name}", "finding": sub == "findings", "hits": n_hits,
                          "fault": att.get("fault"), "rule": att.get("rule"), "reason": att.get("reason"),
-                         "event": f"{mb['oracle']}/{mb['kind']}", "clean": clean_outcome(vpath.parent, verdict)})
+                         "event": f"{mb['oracle']}/{mb['kind']}", "confirmed": bool(confirmed),
+                         "clean": clean_outcome(vpath.parent, verdict)})
     execs = 0
     db = out / "index.sqlite"
     if db.exists():
@@ -180,6 +187,8 @@ def _counts(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "differential": len(diff), "caught": len(caught),
         "recall": len(caught) / len(diff) if diff else None,
         "precision": len(true_findings) / len(findings) if findings else None,
+        "precision_confirmed": (sum(r["clean"] == "differential" or r["confirmed"] for r in findings) / len(findings)
+                                if findings else None),
         "differential_hits": sum(r["hits"] for r in diff), "caught_hits": sum(r["hits"] for r in caught),
         "shared": sum(r["clean"] == "shared" for r in rows),
         "first": sum(r["clean"] == "clean_failed_first" for r in rows),
@@ -196,26 +205,29 @@ def print_fault(row: dict[str, Any]) -> None:
     print(f"\n== {row['fault']}: {row['execs']} executions{wall}; {c['findings']} findings, {c['incidents']} incidents "
           f"(folders); clean ADS: {c['differential']} avoided, {c['shared']} shared, {c['first']} failed first")
     print(f"   recall {_pct(c['recall'])} ({c['caught']}/{c['differential']} folders, "
-          f"{c['caught_hits']}/{c['differential_hits']} hits)   precision {_pct(c['precision'])}")
+          f"{c['caught_hits']}/{c['differential_hits']} hits)   precision {_pct(c['precision'])} "
+          f"(confirmed {_pct(c['precision_confirmed'])})")
     for r in row["folders"]:
         if r["clean"] == "differential" and not r["finding"]:
             print(f"   MISS {r['folder']} [{r['event']}, rule {r['rule']}, {r['hits']} hit(s)]: {r['reason']}")
     for r in row["folders"]:
         if r["finding"] and r["clean"] == "shared":
-            print(f"   SHARED FINDING {r['folder']} [{r['event']}, rule {r['rule']}]: {r['reason']}")
+            how = "confirmed" if r["confirmed"] else "UNCONFIRMED"
+            print(f"   SHARED FINDING ({how}) {r['folder']} [{r['event']}, rule {r['rule']}]: {r['reason']}")
 
 
 def summarise(rows: list[dict[str, Any]]) -> None:
-    print("\nfault                    execs findings incidents differential caught recall precision")
+    print("\nfault                    execs findings incidents differential caught recall precision confirmed")
     every = []
     for row in rows:
         c = _counts(row["folders"])
         every += row["folders"]
         print(f"{row['fault']:<24} {row['execs']:>5} {c['findings']:>8} {c['incidents']:>9} {c['differential']:>12} "
-              f"{c['caught']:>6} {_pct(c['recall']):>6} {_pct(c['precision']):>9}")
+              f"{c['caught']:>6} {_pct(c['recall']):>6} {_pct(c['precision']):>9} {_pct(c['precision_confirmed']):>9}")
     c = _counts(every)
     print(f"{'all':<24} {sum(r['execs'] for r in rows):>5} {c['findings']:>8} {c['incidents']:>9} "
-          f"{c['differential']:>12} {c['caught']:>6} {_pct(c['recall']):>6} {_pct(c['precision']):>9}")
+          f"{c['differential']:>12} {c['caught']:>6} {_pct(c['recall']):>6} {_pct(c['precision']):>9} "
+          f"{_pct(c['precision_confirmed']):>9}")
 
 
 if __name__ == "__main__":

@@ -7,6 +7,13 @@ settings, as its triage ran it) and signed again (:func:`drivefuzz.triage.signat
 each folder whose fault, reason or signature changed, the old and the new, then a count::
 
     python tools/rejudge.py CAMPAIGN [CAMPAIGN ...]
+    python tools/rejudge.py --cases tests/data        # scenario folders without a stored verdict
+
+``--cases DIR``: every scenario folder under DIR (such as the campaign cases kept in tests/data) is run with
+every oracle and its first misbehaviour judged twice: in the order before issue 31 (an excusing rule decides
+``other`` before any replay) and in the current one (the excuse is a hypothesis the careful driver's replay
+tests); each folder whose verdict differs is printed with both. The network is looked for in the folder, then
+in networks/.
 
 For reading what a change to the rules does to real verdicts before it lands. Nothing is written: the
 folders keep their verdict.json. Prints only; an evaluation script, not a test.
@@ -25,8 +32,11 @@ sys.path.insert(0, str(REPO))
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("campaigns", type=Path, nargs="+", help="campaign output folders")
+    ap.add_argument("campaigns", type=Path, nargs="*", help="campaign output folders")
+    ap.add_argument("--cases", type=Path, help="a folder of scenario folders to run and judge (tests/data)")
     args = ap.parse_args(argv)
+    if args.cases:
+        return cases(args.cases)
 
     from drivefuzz.oracle import Misbehavior, OracleSettings
     from drivefuzz.scenario.roadmap import load_roadmap
@@ -67,6 +77,50 @@ def main(argv: list[str] | None = None) -> int:
             if sig.label != was_sig:
                 print(f"  signature was {was_sig}\n            now {sig.label}")
     print(f"{changed} of {total} verdicts changed, {faults} of them in fault")
+    return 0
+
+
+def cases(root: Path) -> int:
+    """Run and judge each scenario folder under ``root`` in the old order and the current one."""
+    import shutil
+    import tempfile
+
+    from drivefuzz.oracle import OracleSettings
+    from drivefuzz.scenario.roadmap import load_roadmap
+    from drivefuzz.scenario.sumofiles import load_scenario
+    from drivefuzz.sim.execute import execute
+    from drivefuzz.triage.attribute import Fault, attribute
+
+    def careful(sc):
+        ex = execute(sc, oracles=OracleSettings().instantiate())
+        return ex.misbehaviors, ex.trace
+
+    total = changed = 0
+    for d in sorted(p for p in root.iterdir() if (p / "scenario.json").exists()):
+        net = json.loads((d / "scenario.json").read_text())["network"]
+        with tempfile.TemporaryDirectory() as tmp:
+            folder = Path(tmp) / d.name
+            shutil.copytree(d, folder)
+            if not (folder / Path(net).name).exists():
+                shutil.copy(REPO / "networks" / Path(net).name, folder / Path(net).name)
+            sc = load_scenario(folder)
+            ex = execute(sc, oracles=OracleSettings().instantiate())
+            if not ex.misbehaviors:
+                print(f"{d.name}: no misbehaviour")
+                continue
+            m = ex.misbehaviors[0]
+            rmap = load_roadmap(sc.network_path())
+            rules = attribute(sc, ex.trace, m, rmap)
+            new = attribute(sc, ex.trace, m, rmap, replay=careful)
+            old = rules if rules.fault is Fault.OTHER else new  # before: an excuse decided without a replay
+        total += 1
+        if (old.fault, old.rule) == (new.fault, new.rule):
+            print(f"{d.name}: {m.oracle}/{m.kind} {new.fault.value} ({new.rule}), unchanged")
+            continue
+        changed += 1
+        print(f"{d.name}: {m.oracle}/{m.kind}\n  was {old.fault.value} ({old.rule}): {old.reason}\n"
+              f"  now {new.fault.value} ({new.rule}): {new.reason}")
+    print(f"{changed} of {total} verdicts changed")
     return 0
 
 

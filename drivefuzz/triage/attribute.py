@@ -49,7 +49,8 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   failed first, never came near, did not run); otherwise the verdict is the ego's, under the rule of
   :data:`AVOIDED` (``stationary_struck`` -> ``stopped_in_the_way``, ``pedestrian`` -> ``pedestrian_avoidable``,
   ...), and its reason says what the careful driver did instead (how close it came to the other party, where
-  and how fast it was at the event's time). Two excuses hold without a replay (their evidence says why,
+  and how fast it was at the event's time). A replay that never came within :data:`MET_M` of the other party
+  says nothing either: it passed before or after the other came, which is timing, not care. Two excuses hold without a replay (their evidence says why,
   under :data:`KEPT`), because the ego could not have been elsewhere in a way that matters:
 
   - *stationary*, struck in its rear half by a vehicle that did not slow by more than 1 m/s in the
@@ -57,7 +58,10 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
     ego had stopped, and the ego stood lawfully there (not on red, not reaching into another's lane);
   - *rear*, struck from behind while lawfully in its lane and braking no harder than :data:`COMFORT_DECEL`:
     the follower's to avoid by any driver's standard. A hard stop for a hazard keeps the rule's excuse only if
-    the careful driver, who anticipates, had to brake and was struck too.
+    the careful driver, who anticipates, had to brake and was struck too;
+  - *held up* (a time-out behind slower traffic it could not pass): a leader holds up any driver behind it
+    alike, and a replay in which SUMO's leader drives differently (it reacts to the ego) would test the
+    leader, not the ego.
 
   Without ``replay`` an excuse stands from the rules alone (the triage's first, cheap verdict that names the
   signature; :func:`needs_replay` says which verdicts the triage must replay before it files them).
@@ -219,6 +223,9 @@ AVOIDED: dict[str, str] = {
     "queue": "blocked_avoidable",
     "held_up": "blocked_avoidable",
 }
+#: [m] centre to centre: a careful driver whose replay never came this close to the other party never met it (it
+#: came by earlier or later): its keeping clear says nothing about the ego's excuse.
+MET_M = 15.0
 #: The oracles of a standstill: an excuse of one (blocked, held up) holds when the careful driver fails either.
 STANDSTILL = frozenset({"immobility", "mission"})
 #: Evidence key of an excuse that holds without a replay (its value says why).
@@ -436,6 +443,14 @@ def test_excuse(scenario, trace, misbehavior, replay: Replay, verdict: Attributi
                            evidence, verdict.rule)
     instead = _what_careful_did(ctrace, trace, misbehavior)
     evidence["counterfactual"].update(instead[1])
+    if stuck and instead[1]["careful_distance_to_place"] <= REACHED_M and instead[1]["careful_speed_then"] <= 0.5:
+        # no oracle fired on the replay, but it stood at the same place at the event's time: it was held the same
+        return Attribution(Fault.OTHER, f"{verdict.reason}; a careful driver stood there too at {misbehavior.time:.1f} s",
+                           evidence, verdict.rule)
+    closest = instead[1].get("careful_closest")
+    if closest is not None and closest > MET_M:  # it never met the other party: timing, not care, spared it
+        return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing (it never met "
+                                        f"{misbehavior.actors[0]}: {closest:.0f} m at the closest)", evidence, verdict.rule)
     return Attribution(Fault.EGO, f"{verdict.reason}, but a careful driver avoided it: {instead[0]}", evidence,
                        AVOIDED[verdict.rule])
 
@@ -842,7 +857,8 @@ class _Event:
             if self.mb.kind == "timeout" and held is not None:
                 share, leader = held
                 return self.other("held_up", f"held up behind slower traffic ({leader}) for {share:.0%} of the run",
-                                  held_share=share, leader=leader)
+                                  held_share=share, leader=leader,
+                                  **{KEPT: "a leader it cannot pass holds up any driver behind it alike"})
             # a moving ego, not held up: fog, rain and ice slow a careful driver too, and a time limit too
             # short for the route holds for everyone, which its replay shows
             self.replay_may_settle = self.mb.kind == "timeout"
