@@ -109,7 +109,11 @@ class CommonRoadADS(ADS):
         self.failsafe = False
         self._done = False
         self.log: dict[str, list] = {"t": [], "outcome": [], "error": [], "wall": [], "v_des": []}
-        self.make_planner(self.ref_pts, params)
+        self.setup_error = ""
+        try:  # a planner that cannot be set up is the ADS failing: every cycle is then recorded as raised
+            self.make_planner(self.ref_pts, params)
+        except Exception as exc:
+            self.setup_error = f"at set-up: {type(exc).__name__}: {exc}"[:200]
 
     # -- for subclasses ---------------------------------------------------------------------------
     @abc.abstractmethod
@@ -167,9 +171,9 @@ class CommonRoadADS(ADS):
         ch, sh = math.cos(ego.heading), math.sin(ego.heading)
         state = CarState(ego.x - r * ch, ego.y - r * sh, ego.heading, ego.speed, ego.ax, ego.yaw_rate,
                          ego.road_wheel_angle)
-        error = ""
+        error = self.setup_error
         try:
-            result = self.plan(state, checker, v_des)
+            result = None if error else self.plan(state, checker, v_des)
         except Exception as exc:  # the planner's failure is the ADS's failure: fail-safe, recorded
             result, error = None, f"{type(exc).__name__}: {exc}"[:200]
         outcome = PLANNED if result is not None else (RAISED if error else NO_PLAN)
