@@ -1,23 +1,49 @@
-"""Campaign throughput against the number of parallel jobs (issue 7's scaling figure).
+"""Campaign throughput against the number of parallel jobs, and where each process spent its time.
 
     python tools/bench_scaling.py [--jobs 1,2] [--budget 60] [--network networks/town.net.xml]
+    python tools/bench_scaling.py --jobs 1,4,8,16      # on a machine with 16 cores or more
 
 For each job count N it runs the same campaign (the network's committed seeds,
-the clean reference ADS, strategy ``all``, continuing after findings) for the
-same wall-clock budget: N = 1 in this process (what ``drivefuzz fuzz`` does),
-N > 1 on a local Dask cluster of N single-threaded workers (``--jobs N``). It
-prints executions per hour and the efficiency, throughput / (N x the one-job
-throughput). Cluster start-up is inside the budget, as a user would see it; the
-executions-per-hour column also excludes it ("steady").
+repeated to N seeds where there are fewer, the clean reference ADS, strategy
+``all``, continuing after findings) for the same wall-clock budget: N = 1 in this
+process (what ``drivefuzz fuzz`` does), N > 1 on a local Dask cluster of N
+single-threaded workers (``--jobs N``).
+
+Work done is counted three ways, from the campaign's journals:
+
+    sim s   simulated seconds of every run: the executions and the triage reruns (the careful
+            driver's replays, the reproduction reruns, the shrinking runs); the headline figure,
+            since seeds differ in how long their executions simulate
+    runs    executions plus triage reruns
+    execs   executions only (what the search counts)
+
+Efficiency = the work rate at N jobs / (N x the work rate at 1 job), the rate over
+the campaign's own run (from its first job starting to its end). Starting the
+local Dask cluster is a fixed cost before it and is printed apart ("start-up").
+
+Then, per job count, where the time went, one figure per stage (as ``bench_fuzz.py``):
+a column per process that runs jobs (the campaign process at N = 1, each Dask worker
+otherwise), the execution stages summed over its executions (the simulation-host
+stages are the worker waiting on its host), and what is left of its wall time
+outside any execution (round set-up, Dask round trips, waiting); then the CPU time
+of every process of the campaign: the campaign process (its main thread apart from
+Dask's threads, which run the local scheduler), each worker, each simulation host,
+each nanny. The machine's load average is printed before each point, since other
+work on the machine depresses the figures at N > 1 first.
+
+Prints only; a benchmark, not a test.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
+import sqlite3
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -28,26 +54,209 @@ from drivefuzz.campaign.fuzz import Campaign, FuzzConfig  # noqa: E402
 from drivefuzz.scenario.seed import list_seeds  # noqa: E402
 from drivefuzz.scenario.sumofiles import load_scenario  # noqa: E402
 
+#: (key of an execution record's timings, label); the first eight run in the simulation host
+STAGES = [
+    ("sumo", "SUMO start + stepping"),
+    ("physics", "physics (+ moveToXY)"),
+    ("ads", "ADS under test"),
+    ("observe", "ADS observation"),
+    ("world", "world read-out"),
+    ("record", "trace recording"),
+    ("oracles", "oracles"),
+    ("setup", "execution setup"),
+    ("isolation", "crash isolation (IPC)"),
+    ("quality", "feedback (risk + quality)"),
+    ("triage", "triage (+ its reruns)"),
+    ("mutation", "mutation (+ retries)"),
+    ("storage", "storage"),
+]
 
-def run_point(jobs: int, seeds, budget: float, workdir: Path) -> dict[str, float]:
+
+# ------------------------------------------------------------------------------ processes
+def _cpu_s(proc) -> float:
+    t = proc.cpu_times()
+    return t.user + t.system
+
+
+def process_cpu(worker_pids: dict[int, str]) -> dict[int, tuple[str, float]]:
+    """{pid: (role, CPU seconds so far)} of this process and every process under it."""
+    import psutil
+
+    me = psutil.Process()
+    out = {me.pid: ("campaign process", _cpu_s(me))}
+    for child in me.children(recursive=True):
+        try:
+            cmd = " ".join(child.cmdline())
+            parent = child.ppid()
+            if child.pid in worker_pids:
+                role = worker_pids[child.pid]
+            elif "drivefuzz.sim.simhost" in cmd:
+                role = f"simulation host of {worker_pids.get(parent, 'the campaign process')}"
+            elif any(p in worker_pids for p in (c.pid for c in child.children())):
+                role = "nanny of " + next(worker_pids[c.pid] for c in child.children() if c.pid in worker_pids)
+            else:
+                role = "other (Dask/multiprocessing helper)"
+            out[child.pid] = (role, _cpu_s(child))
+        except psutil.Error:  # ended meanwhile
+            continue
+    return out
+
+
+def thread_cpu(runs_jobs: str = "main") -> dict[str, float]:
+    """CPU seconds of this process's threads: the thread that runs the jobs (``main``, or ``dask`` for a Dask
+    worker's task threads), and the rest (Dask's event loop and its helpers)."""
+    import psutil
+
+    main = threading.main_thread().native_id
+    if runs_jobs == "main":
+        jobs = {main}
+        labels = ("main thread (the jobs, following the journals)", "other threads (Dask client, scheduler, nannies)")
+    else:
+        jobs = {t.native_id for t in threading.enumerate() if "Dask-Default-Threads" in t.name}
+        labels = ("task thread (the job)", "other threads (Dask event loop, monitors)")
+    split = dict.fromkeys(labels, 0.0)
+    for t in psutil.Process().threads():
+        split[labels[0] if t.id in jobs else labels[1]] += t.user_time + t.system_time
+    return split
+
+
+def _worker_threads() -> dict[str, float]:
+    return thread_cpu("dask")
+
+
+class _Timed:
+    """Wall seconds the campaign process spends in one of its methods (bench-only wrapper)."""
+
+    def __init__(self, fn):
+        self.fn, self.seconds, self.calls = fn, 0.0, 0
+
+    def __call__(self, *a, **kw):
+        t0 = time.perf_counter()
+        try:
+            return self.fn(*a, **kw)
+        finally:
+            self.seconds += time.perf_counter() - t0
+            self.calls += 1
+
+
+# ------------------------------------------------------------------------------ one point
+def run_point(jobs: int, seeds, budget: float, workdir: Path) -> dict:
     cfg = FuzzConfig(cycles=1000, population=8, continue_after_finding=True, seed=1, budget_s=budget)
     out = workdir / f"jobs{jobs}"
     campaign = Campaign(out, seeds, cfg)
-    first: list[float] = []
-    campaign.on_progress = lambda p: first.append(time.monotonic()) if not first and p.execs else None
+    campaign.poll = poll = _Timed(campaign.poll)
+    load = os.getloadavg()
+    threads0 = thread_cpu()
+    point: dict = {"jobs": jobs, "load": load}
     t0 = time.monotonic()
     if jobs == 1:
+        cpu0 = process_cpu({})
+        t_run = time.monotonic()
         campaign.run()
+        point["wall"] = time.monotonic() - t_run
+        cpu1 = process_cpu({})
+        names = {os.getpid(): "campaign process"}
     else:
         from drivefuzz.campaign.cluster import dask_client
 
         with dask_client("local", jobs=jobs) as client:
+            pids = client.run(os.getpid)
+            names = {pid: f"worker {i + 1}" for i, pid in enumerate(sorted(pids.values()))}
+            wt0 = client.run(_worker_threads)
+            cpu0 = process_cpu(names)
+            t_run = time.monotonic()
             campaign.run(client=client)
-    wall = time.monotonic() - t0
-    execs = campaign.progress.execs
-    steady = wall - (first[0] - t0) if first else wall
-    return {"execs": execs, "wall": wall, "per_hour": execs / wall * 3600,
-            "steady_per_hour": max(execs - 1, 0) / max(steady, 1e-9) * 3600}
+            point["wall"] = time.monotonic() - t_run
+            cpu1 = process_cpu(names)
+            wt1 = client.run(_worker_threads)
+            point["worker_threads"] = {names[pids[a]]: {k: v - wt0.get(a, {}).get(k, 0.0) for k, v in wt1[a].items()}
+                                       for a in wt1 if a in pids}
+    point["startup"] = t_run - t0
+    threads1 = thread_cpu()
+    point["cpu"] = {pid: (role, cpu - cpu0.get(pid, (role, 0.0))[1]) for pid, (role, cpu) in cpu1.items()}
+    point["threads"] = {k: threads1[k] - threads0.get(k, 0.0) for k in threads1}
+    point["poll"] = (poll.seconds, poll.calls)
+    point["names"] = names
+    point.update(read_work(out))
+    return point
+
+
+def read_work(out: Path) -> dict:
+    """Executions, runs, simulated seconds, and the stage timings summed per process, from the journals."""
+    recs = []
+    for path in sorted((out / "jobs").glob("*/journal.jsonl")):
+        for line in path.read_text().splitlines():
+            try:
+                rec = json.loads(line)
+            except ValueError:
+                continue
+            if rec.get("event") == "end":
+                recs.append(rec)
+    db = sqlite3.connect(out / "index.sqlite")
+    indexed = db.execute("SELECT COUNT(*) FROM executions").fetchone()[0]
+    db.close()
+    stages: dict[int, dict[str, float]] = {}
+    for r in recs:
+        acc = stages.setdefault(r["pid"], {})
+        for k, v in (r.get("timings") or {}).items():
+            acc[k] = acc.get(k, 0.0) + float(v)
+    return {"execs": len(recs), "indexed": indexed, "runs": sum(r.get("runs", 1) for r in recs),
+            "sim_s": sum(r.get("sim_s", 0.0) for r in recs), "stages": stages,
+            "findings": len([p for p in (out / "findings").iterdir() if not p.name.startswith(".")]),
+            "incidents": len([p for p in (out / "incidents").iterdir() if not p.name.startswith(".")])}
+
+
+# ------------------------------------------------------------------------------ printing
+def print_point(p: dict) -> None:
+    n = p["jobs"]
+    print(f"\n=== jobs={n}: {p['execs']} executions, {p['runs']} runs (+{p['runs'] - p['execs']} triage reruns), "
+          f"{p['sim_s']:.0f} s simulated, in {p['wall']:.1f} s (+ {p['startup']:.1f} s start-up); "
+          f"{p['findings']} findings, {p['incidents']} incidents; load average before: "
+          f"{p['load'][0]:.2f} {p['load'][1]:.2f} {p['load'][2]:.2f}")
+    if p["indexed"] != p["execs"]:
+        print(f"    (the index holds {p['indexed']} executions, the journals {p['execs']})")
+    cols = sorted(p["stages"], key=lambda pid: p["names"].get(pid, str(pid)))
+    heads = [p["names"].get(pid, f"pid {pid}") for pid in cols]
+    print(f"  where each job-running process spent its wall time [s] ({p['wall']:.1f} s each):")
+    print(f"    {'stage':<42}" + "".join(f"{h:>18}" for h in heads))
+    for key, label in STAGES:
+        if key == "isolation":
+            print(f"    {'  (the above in the simulation host)':<42}"
+                  + "".join(f"{sum(p['stages'][c].get(k, 0.0) for k, _ in STAGES[:8]):>18.2f}" for c in cols))
+        print(f"    {label:<42}" + "".join(f"{p['stages'][c].get(key, 0.0):>18.2f}" for c in cols))
+    inside = [sum(p["stages"][c].values()) for c in cols]
+    print(f"    {'in executions':<42}" + "".join(f"{v:>18.2f}" for v in inside))
+    print(f"    {'outside executions (set-up, Dask, idle)':<42}" + "".join(f"{p['wall'] - v:>18.2f}" for v in inside))
+    print(f"  CPU time of each process [s] (share of the {p['wall']:.1f} s):")
+    for pid, (role, cpu) in sorted(p["cpu"].items(), key=lambda kv: kv[1][0]):
+        if cpu < 0.005:
+            continue
+        print(f"    {role:<48}{cpu:>8.2f}  {100 * cpu / p['wall']:>5.1f} %")
+    for name, cpu in p["threads"].items():
+        print(f"      campaign process, {name:<56}{cpu:>8.2f}")
+    for worker, split in sorted(p.get("worker_threads", {}).items()):
+        for name, cpu in split.items():
+            print(f"      {worker}, {name:<64}{cpu:>8.2f}")
+    secs, calls = p["poll"]
+    print(f"      campaign process: following the journals + indexing: {secs:.2f} s wall in {calls} polls")
+
+
+def print_summary(rows: list[dict]) -> None:
+    base = next((r for r in rows if r["jobs"] == 1), None)
+    print(f"\n{'jobs':>4} {'load':>5} {'execs':>6} {'runs':>6} {'sim s':>7} {'wall s':>7} {'sim s/s':>8} "
+          f"{'runs/h':>8} {'execs/h':>8}   {'efficiency: sim s':>17} {'runs':>6} {'execs':>6}")
+    for r in rows:
+        rates = {k: r[k] / r["wall"] for k in ("sim_s", "runs", "execs")}
+        if base is not None:
+            eff = {k: rates[k] / (r["jobs"] * base[k] / base["wall"]) for k in rates}
+        else:
+            eff = {k: float("nan") for k in rates}
+        print(f"{r['jobs']:>4} {r['load'][0]:>5.2f} {r['execs']:>6} {r['runs']:>6} {r['sim_s']:>7.0f} {r['wall']:>7.1f} "
+              f"{rates['sim_s']:>8.1f} {3600 * rates['runs']:>8.0f} {3600 * rates['execs']:>8.0f}   "
+              f"{eff['sim_s']:>17.2f} {eff['runs']:>6.2f} {eff['execs']:>6.2f}")
+    print("efficiency = work rate at N jobs / (N x the rate at 1 job); work in simulated seconds (the headline), "
+          "in runs (executions + triage reruns), and in executions only; 'load' = the 1-minute load average "
+          "before the point (other work on the machine depresses N > 1)")
 
 
 def main() -> None:
@@ -59,23 +268,26 @@ def main() -> None:
     counts = [int(x) for x in args.jobs.split(",")]
     name = Path(args.network).name.split(".")[0]
     seeds = [load_scenario(p) for p in list_seeds(ROOT / "seeds" / name)]
-    if len(seeds) < max(counts):
-        sys.exit(f"need at least {max(counts)} seeds in seeds/{name}/, found {len(seeds)}")
-    print(f"machine: {os.cpu_count()} cores; network {name}, {len(seeds)} seeds, {args.budget:.0f} s per point")
+    if not seeds:
+        sys.exit(f"no seeds in seeds/{name}/")
+    n_seeds = max(len(seeds), max(counts))
+    seeds = [seeds[i % len(seeds)] for i in range(n_seeds)]  # a repeated seed is its own job (own random streams)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    print(f"machine: {cores} cores; network {name}, {n_seeds} seed jobs, {args.budget:.0f} s per point; "
+          f"jobs {','.join(map(str, counts))}")
+    if max(counts) > (cores or 1):
+        print(f"NOTE: {max(counts)} jobs on {cores} cores: the jobs share cores, efficiency falls below 1 by design")
     workdir = Path(tempfile.mkdtemp(prefix="bench-scaling-"))
     rows = []
     try:
         for n in counts:
             r = run_point(n, seeds, args.budget, workdir)
-            rows.append((n, r))
-            print(f"  jobs={n}: {r['execs']} executions in {r['wall']:.1f} s", flush=True)
+            rows.append(r)
+            print_point(r)
+            sys.stdout.flush()
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
-    base = next((r for n, r in rows if n == 1), None)
-    print(f"\n{'jobs':>4} {'execs':>6} {'execs/hour':>11} {'steady/hour':>12} {'efficiency':>11}")
-    for n, r in rows:
-        eff = r["per_hour"] / (n * base["per_hour"]) if base else float("nan")
-        print(f"{n:>4} {r['execs']:>6} {r['per_hour']:>11.0f} {r['steady_per_hour']:>12.0f} {eff:>11.2f}")
+    print_summary(rows)
 
 
 if __name__ == "__main__":

@@ -27,6 +27,15 @@ BATCH_SYSTEMS = ("slurm", "pbs", "sge", "lsf")
 DASK_SETTINGS = {
     "distributed.scheduler.worker-saturation": 1.0,  # one job per worker; the rest wait on the scheduler
     "distributed.scheduler.allowed-failures": 3,  # a job may take down 3 workers before Dask gives up on it
+    # Dask's own periodic work, cut to what a few long tasks need: it runs on the cores the simulations need.
+    # Measured on 2 cores, 2 workers running pure-Python tasks: the workers' Dask threads 2.2 % of a core each
+    # and the campaign process's (scheduler, nannies) 2.5 %, against 0.4 % and 0.9 % with these settings.
+    "distributed.worker.profile.enabled": False,  # the statistical profiler: a stack sample every 10 ms in
+    # the job's own process, for the dashboard's profile page
+    "distributed.admin.tick.interval": "1s",  # the event-loop watchdog: every 20 ms in every process
+    "distributed.worker.memory.monitor-interval": "1s",  # every 100 ms per worker and per nanny
+    "distributed.admin.system-monitor.interval": "2s",  # the dashboard's CPU, memory and network plots
+    "distributed.scheduler.work-stealing": False,  # nothing to steal: a worker holds one job at a time
 }
 
 
@@ -144,9 +153,14 @@ def _connect(where: str):
 
 def dask_setup(worker) -> None:
     """Worker preload (``distributed.worker.preload``): a terminal's Ctrl-C reaches every process in the
-    foreground group, but only the campaign process decides how a campaign stops."""
+    foreground group, but only the campaign process decides how a campaign stops. And the worker readies
+    itself for seed jobs (imports, a simulation host) before it registers, as part of the cluster's start-up
+    (:func:`drivefuzz.campaign.job.warm_worker`)."""
     import signal
     import threading
 
     if threading.current_thread() is threading.main_thread():
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+    from drivefuzz.campaign.job import warm_worker
+
+    warm_worker()

@@ -26,9 +26,14 @@ exactly the executions it had not finished.
 
 Files of job ``NNN`` (the seed index) under ``jobs/NNN/``::
 
-    journal.jsonl     append-only, fsync'd: {"event": "start", key, pid} before an
+    journal.jsonl     append-only: {"event": "start", key, pid} before an
                       execution (attributes a crash to its scenario), then
-                      {"event": "end", ...the execution's record} after it
+                      {"event": "end", ...the execution's record} after it; each record is
+                      handed to the OS at once (a killed process loses none), and the file is
+                      fsync'd before every checkpoint and at the end of a round, not per record
+                      (two fsyncs per execution cost 5 % of a campaign's time): a power cut
+                      loses at most the current cycle's records, whose executions a resume
+                      runs again with the same results
     checkpoint.json   the schedule (corpus, the current lineage) and the seed's baseline risk (atomic)
     summary.json      written last, when the job has finished its seed: the DONE marker
     owner             the attempt that owns the job: an older attempt that is still running
@@ -83,7 +88,8 @@ def read_journal(path: Path) -> list[dict[str, Any]]:
     return records
 
 
-def _append(path: Path, rec: dict[str, Any], after_kill: bool = False) -> None:
+def _append(path: Path, rec: dict[str, Any], after_kill: bool = False, sync: bool = False) -> None:
+    """Append ``rec`` as one line; handed to the OS at once, on the disk at once only with ``sync``."""
     with open(path, "ab+") as fh:
         lead = b""
         if after_kill and fh.tell() > 0:  # a kill may have torn the last line: start on a line of our own
@@ -91,7 +97,20 @@ def _append(path: Path, rec: dict[str, Any], after_kill: bool = False) -> None:
             lead = b"" if fh.read(1) == b"\n" else b"\n"
         fh.write(lead + json.dumps(rec, sort_keys=True).encode() + b"\n")
         fh.flush()
-        os.fsync(fh.fileno())
+        if sync:
+            os.fsync(fh.fileno())
+
+
+def _sync(path: Path) -> None:
+    """fsync a journal: what a checkpoint (or the campaign) relies on is on the disk before it."""
+    try:
+        fd = os.open(path, os.O_RDONLY)
+    except FileNotFoundError:
+        return
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 class SeedJob:
@@ -140,6 +159,7 @@ class SeedJob:
         return ref
 
     def _checkpoint(self, schedule, baseline: dict[str, Any] | None) -> None:
+        _sync(self.journal)  # the checkpoint never gets ahead of the journal on the disk
         atomic_write_json(self.dir / "checkpoint.json", {"schedule": schedule.to_json(), "baseline": baseline})
 
     def _read_checkpoint(self, schedule_cls) -> tuple[dict[str, Any], Any]:
@@ -183,10 +203,14 @@ class SeedJob:
         done = {r["key"]: r for r in history if r.get("event") == "end"}
         attempts = sum(1 for r in history if r.get("event") == "attempt") + 1
         _append(self.journal, {"event": "attempt", "pid": os.getpid(), "resumed_from": len(done),
-                               "host": os.uname().nodename, "time": time.time(), "run": self.run_id}, after_kill=True)
+                               "host": os.uname().nodename, "time": time.time(), "run": self.run_id}, after_kill=True,
+                sync=True)
         self.findings = sorted({r["finding"] for r in done.values() if r.get("finding")})
         resumed_from = len(done)
-        status = self._loop(done, should_stop, on_record or (lambda rec: None))
+        try:
+            status = self._loop(done, should_stop, on_record or (lambda rec: None))
+        finally:
+            _sync(self.journal)  # the round's records are on the disk before it returns
         if status == "superseded":
             return {"seed_index": self.si, "status": status, "execs": len(done), "pid": os.getpid()}
         summary = {"seed_index": self.si, "status": status, "execs": len(done), "findings": self.findings,
@@ -312,6 +336,7 @@ class SeedJob:
         from drivefuzz.sim.simhost import OK
         from drivefuzz.triage.signature import situation
 
+        runs0, sim0 = runner.runs, runner.sim_s
         out = runner.execute(scenario)
         timings = {"mutation": t_mutate, "isolation": 0.0}
         t_store = time.perf_counter()
@@ -351,6 +376,9 @@ class SeedJob:
                        verdict=f"{m.oracle}/{m.kind}", finding=filed.rel, signature=filed.signature, fault="ego")
         timings["storage"] = time.perf_counter() - t_store - timings.get("triage", 0.0)  # triage has its own key
         rec["timings"] = {k: round(v, 6) for k, v in timings.items()}
+        # the work this record stands for: the execution and every triage rerun (careful driver, reproduction,
+        # shrinking), in runs and in simulated seconds (tools/bench_scaling.py counts work by them)
+        rec["runs"], rec["sim_s"] = runner.runs - runs0, round(runner.sim_s - sim0, 3)
 
 
 def _feedback_value(rec: dict[str, Any], mode: str) -> float:
@@ -369,6 +397,14 @@ def _baseline(detail: dict[str, Any] | None):
 _WARMED = False
 
 
+def _warm_imports() -> None:
+    try:
+        import scipy.signal  # noqa: F401
+        import pyarrow.parquet  # noqa: F401
+    except Exception:  # noqa: BLE001 - the score and the trace import them again and report what is wrong
+        pass
+
+
 def _warm_up() -> None:
     """Import scipy.signal (the driving-quality score's filters: 0.4 s, once per process) and pyarrow's Parquet
     writer (a finding's trace: 0.07 s) on a thread of its own while the first executions run in the
@@ -380,22 +416,50 @@ def _warm_up() -> None:
     _WARMED = True
     import threading
 
-    def work() -> None:
-        try:
-            import scipy.signal  # noqa: F401
-            import pyarrow.parquet  # noqa: F401
-        except Exception:  # noqa: BLE001 - the score and the trace import them again and report what is wrong
-            pass
+    threading.Thread(target=_warm_imports, name="drivefuzz-warm-up", daemon=True).start()
 
-    threading.Thread(target=work, name="drivefuzz-warm-up", daemon=True).start()
+
+def warm_worker() -> None:
+    """Ready this process for seed jobs before it is given one (a local Dask worker's preload): the imports a
+    job makes as it starts, and a simulation host, started. A cold worker did that inside the campaign's
+    budget, where no core is free for it (on 2 cores, 2 jobs' first rounds waited 1-2 s each on scipy's
+    import, a job on its own 0.2 s); here it is part of the cluster's start-up. Best effort: whatever fails
+    here fails again, and is reported, where a job needs it."""
+    global _WARMED
+    _WARMED = True
+    _warm_imports()
+    try:
+        import drivefuzz.scenario.roadmap  # noqa: F401
+        import drivefuzz.search.mutate  # noqa: F401
+        import drivefuzz.search.quality  # noqa: F401
+        import drivefuzz.search.risk  # noqa: F401
+        import drivefuzz.search.schedule  # noqa: F401
+        import drivefuzz.triage.attribute  # noqa: F401
+        import drivefuzz.triage.signature  # noqa: F401
+        from drivefuzz.sim.simhost import SimHost
+
+        host = SimHost().start()
+    except Exception:  # noqa: BLE001 - see above
+        return
+    _close_hosts_at_exit()
+    _SPARE.append(host)
 
 
 _HOSTS: dict[int, Any] = {}  # one simulation host per thread of this process, kept between jobs
+_SPARE: list[Any] = []  # hosts started before a thread asked for one (warm_worker)
+_AT_EXIT: list[bool] = []
+
+
+def _close_hosts_at_exit() -> None:
+    if not _AT_EXIT:
+        import atexit
+
+        _AT_EXIT.append(True)
+        atexit.register(lambda: [h.close() for h in [*_HOSTS.values(), *_SPARE]])
 
 
 def _host_for_this_thread(timeout_s: float):
     """The calling thread's simulation host (started lazily; a Dask worker reuses it for every job)."""
-    import atexit
     import threading
 
     from drivefuzz.sim.simhost import SimHost
@@ -403,9 +467,8 @@ def _host_for_this_thread(timeout_s: float):
     tid = threading.get_ident()
     host = _HOSTS.get(tid)
     if host is None:
-        if not _HOSTS:
-            atexit.register(lambda: [h.close() for h in _HOSTS.values()])
-        host = _HOSTS[tid] = SimHost()
+        _close_hosts_at_exit()
+        host = _HOSTS[tid] = _SPARE.pop() if _SPARE else SimHost()
     host.timeout_s = timeout_s
     return host
 
@@ -416,6 +479,16 @@ class _Runner:
     def __init__(self, cfg):
         self.cfg = cfg
         self.host = _host_for_this_thread(cfg.exec_timeout_s) if cfg.isolate else None
+        self.runs = 0  # executions run, triage reruns included
+        self.sim_s = 0.0  # [s] simulated by those that ran to the end
+
+    def _count(self, scenario, out):
+        from drivefuzz.sim.simhost import OK
+
+        self.runs += 1
+        if out.status == OK:
+            self.sim_s += out.execution.trace.n_frames * scenario.sim.step_length
+        return out
 
     def misbehaviors(self, scenario):
         """(misbehaviors, trace) of a triage rerun, or None when it did not run to the end."""
@@ -425,6 +498,9 @@ class _Runner:
         return (tuple(out.execution.misbehaviors), out.execution.trace) if out.status == OK else None
 
     def execute(self, scenario):
+        return self._count(scenario, self._execute(scenario))
+
+    def _execute(self, scenario):
         if self.host is not None:
             return self.host.execute(scenario, self.cfg.oracles.settings)
         from drivefuzz.errors import PluginError

@@ -139,6 +139,13 @@ class SimHost:
     def __exit__(self, *exc) -> None:
         self.close()
 
+    def start(self) -> "SimHost":
+        """Start the child now (:meth:`execute` starts it when needed): the first execution finds it ready."""
+        if self.proc is None or self.proc.poll() is not None:
+            self._kill()
+            self._start()
+        return self
+
     @staticmethod
     def _pythonpath() -> str:
         """The parent's import path for the child, less the current folder (unless PYTHONPATH names it), and led
