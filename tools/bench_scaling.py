@@ -1,35 +1,39 @@
 """Campaign throughput against the number of parallel jobs, and where each process spent its time.
 
-    python tools/bench_scaling.py [--jobs 1,2] [--budget 60] [--network networks/town.net.xml]
+    python tools/bench_scaling.py [--jobs 1,2] [--budget 60] [--repeat 1] [--network networks/town.net.xml]
     python tools/bench_scaling.py --jobs 1,4,8,16      # on a machine with 16 cores or more
 
 For each job count N it runs the same campaign (the network's committed seeds,
 repeated to N seeds where there are fewer, the clean reference ADS, strategy
 ``all``, continuing after findings) for the same wall-clock budget: N = 1 in this
 process (what ``drivefuzz fuzz`` does), N > 1 on a local Dask cluster of N
-single-threaded workers (``--jobs N``).
+single-threaded workers (``--jobs N``). ``--repeat R`` runs R rounds of all the
+job counts, interleaved, and prints the median: the load of others on a shared
+machine drifts, and each round's N-job point is compared with its own 1-job point.
 
 Work done is counted three ways, from the campaign's journals:
 
-    sim s   simulated seconds of every run: the executions and the triage reruns (the careful
-            driver's replays, the reproduction reruns, the shrinking runs); the headline figure,
-            since seeds differ in how long their executions simulate
-    runs    executions plus triage reruns
-    execs   executions only (what the search counts)
+    runs    executions plus triage reruns (the careful driver's replays, the reproduction
+            reruns, the shrinking runs): the headline, "work done"
+    sim s   the seconds those runs simulated (seeds differ in how long they simulate)
+    execs   executions only (what the search counts; a triage rerun is not one)
 
 Efficiency = the work rate at N jobs / (N x the work rate at 1 job), the rate over
-the campaign's own run (from its first job starting to its end). Starting the
-local Dask cluster is a fixed cost before it and is printed apart ("start-up").
+the campaign's own run (``Campaign.run``); starting the local Dask cluster is a
+fixed cost before it and is printed apart ("start-up"). The CPU column is work per
+CPU second of all the campaign's processes against the 1-job figure: what the
+campaign layer costs in CPU, whatever the load of others on the machine.
 
-Then, per job count, where the time went, one figure per stage (as ``bench_fuzz.py``):
+Then, per point, where the time went, one figure per stage (as ``bench_fuzz.py``):
 a column per process that runs jobs (the campaign process at N = 1, each Dask worker
 otherwise), the execution stages summed over its executions (the simulation-host
 stages are the worker waiting on its host), and what is left of its wall time
 outside any execution (round set-up, Dask round trips, waiting); then the CPU time
-of every process of the campaign: the campaign process (its main thread apart from
-Dask's threads, which run the local scheduler), each worker, each simulation host,
-each nanny. The machine's load average is printed before each point, since other
-work on the machine depresses the figures at N > 1 first.
+of every process of the campaign: the campaign process (the thread that runs
+jobs or follows the journals apart from Dask's threads: client, local scheduler,
+nannies), each worker (its task thread apart from Dask's), each simulation host.
+The machine's load average is printed before each point: other work on the
+machine depresses the figures at N > 1 first.
 
 Prints only; a benchmark, not a test.
 """
@@ -140,20 +144,23 @@ class _Timed:
 
 
 # ------------------------------------------------------------------------------ one point
-def run_point(jobs: int, seeds, budget: float, workdir: Path) -> dict:
+def run_point(jobs: int, seeds, budget: float, workdir: Path, rep: int = 0) -> dict:
     cfg = FuzzConfig(cycles=1000, population=8, continue_after_finding=True, seed=1, budget_s=budget)
-    out = workdir / f"jobs{jobs}"
+    out = workdir / f"jobs{jobs}-{rep}"
     campaign = Campaign(out, seeds, cfg)
     campaign.poll = poll = _Timed(campaign.poll)
+    stops: list[float] = []
+    request_stop = campaign.request_stop
+    campaign.request_stop = lambda: (stops.append(time.monotonic()), request_stop())
     load = os.getloadavg()
     threads0 = thread_cpu()
-    point: dict = {"jobs": jobs, "load": load}
+    point: dict = {"jobs": jobs, "load": load, "rep": rep}
     t0 = time.monotonic()
     if jobs == 1:
         cpu0 = process_cpu({})
         t_run = time.monotonic()
         campaign.run()
-        point["wall"] = time.monotonic() - t_run
+        t_end = time.monotonic()
         cpu1 = process_cpu({})
         names = {os.getpid(): "campaign process"}
     else:
@@ -166,12 +173,15 @@ def run_point(jobs: int, seeds, budget: float, workdir: Path) -> dict:
             cpu0 = process_cpu(names)
             t_run = time.monotonic()
             campaign.run(client=client)
-            point["wall"] = time.monotonic() - t_run
+            t_end = time.monotonic()
             cpu1 = process_cpu(names)
             wt1 = client.run(_worker_threads)
             point["worker_threads"] = {names[pids[a]]: {k: v - wt0.get(a, {}).get(k, 0.0) for k, v in wt1[a].items()}
                                        for a in wt1 if a in pids}
+    point["wall"] = t_end - t_run
     point["startup"] = t_run - t0
+    # --jobs 1 stops by the budget check between executions, not by STOP
+    point["tail"] = t_end - stops[0] if stops else None
     threads1 = thread_cpu()
     point["cpu"] = {pid: (role, cpu - cpu0.get(pid, (role, 0.0))[1]) for pid, (role, cpu) in cpu1.items()}
     point["threads"] = {k: threads1[k] - threads0.get(k, 0.0) for k in threads1}
@@ -207,14 +217,28 @@ def read_work(out: Path) -> dict:
 
 
 # ------------------------------------------------------------------------------ printing
+def _host_cpu(p: dict) -> float:
+    return sum(cpu for role, cpu in p["cpu"].values() if role.startswith("simulation host"))
+
+
+def _all_cpu(p: dict) -> float:
+    return sum(cpu for _, cpu in p["cpu"].values())
+
+
 def print_point(p: dict) -> None:
     n = p["jobs"]
-    print(f"\n=== jobs={n}: {p['execs']} executions, {p['runs']} runs (+{p['runs'] - p['execs']} triage reruns), "
-          f"{p['sim_s']:.0f} s simulated, in {p['wall']:.1f} s (+ {p['startup']:.1f} s start-up); "
-          f"{p['findings']} findings, {p['incidents']} incidents; load average before: "
-          f"{p['load'][0]:.2f} {p['load'][1]:.2f} {p['load'][2]:.2f}")
+    print(f"\n=== jobs={n} (round {p['rep'] + 1}): {p['execs']} executions, {p['runs']} runs "
+          f"(+{p['runs'] - p['execs']} triage reruns), {p['sim_s']:.0f} s simulated, in {p['wall']:.1f} s "
+          f"(+ {p['startup']:.1f} s cluster start-up before it); {p['findings']} findings, {p['incidents']} incidents; "
+          f"load average before: {p['load'][0]:.2f} {p['load'][1]:.2f} {p['load'][2]:.2f}")
     if p["indexed"] != p["execs"]:
         print(f"    (the index holds {p['indexed']} executions, the journals {p['execs']})")
+    if p["runs"]:
+        print(f"    per run: {1000 * _host_cpu(p) / p['runs']:.0f} ms of simulation-host CPU, "
+              f"{p['sim_s'] / p['runs']:.1f} s simulated; all processes: {1000 * _all_cpu(p) / p['runs']:.0f} ms CPU")
+    if p["tail"] is not None:
+        print(f"    the budget ran out {p['tail']:.1f} s before the last job returned (its running execution and "
+              f"triage finish first)")
     cols = sorted(p["stages"], key=lambda pid: p["names"].get(pid, str(pid)))
     heads = [p["names"].get(pid, f"pid {pid}") for pid in cols]
     print(f"  where each job-running process spent its wall time [s] ({p['wall']:.1f} s each):")
@@ -241,28 +265,50 @@ def print_point(p: dict) -> None:
     print(f"      campaign process: following the journals + indexing: {secs:.2f} s wall in {calls} polls")
 
 
+def efficiencies(p: dict, base: dict) -> dict[str, float]:
+    """Work rate at ``p``'s job count over that many times the one-job rate of ``base``, by each measure of work;
+    ``cpu``: work per CPU second of all the campaign's processes, over the one-job figure."""
+    n = p["jobs"]
+    eff = {k: (p[k] / p["wall"]) / (n * base[k] / base["wall"]) if base[k] else float("nan")
+           for k in ("runs", "sim_s", "execs")}
+    eff["cpu"] = (p["runs"] / _all_cpu(p)) / (base["runs"] / _all_cpu(base)) if base["runs"] else float("nan")
+    return eff
+
+
 def print_summary(rows: list[dict]) -> None:
-    base = next((r for r in rows if r["jobs"] == 1), None)
-    print(f"\n{'jobs':>4} {'load':>5} {'execs':>6} {'runs':>6} {'sim s':>7} {'wall s':>7} {'sim s/s':>8} "
-          f"{'runs/h':>8} {'execs/h':>8}   {'efficiency: sim s':>17} {'runs':>6} {'execs':>6}")
+    print(f"\n{'round':>5} {'jobs':>4} {'load':>5} {'execs':>6} {'runs':>6} {'sim s':>7} {'wall s':>7} {'runs/h':>8}"
+          f"   efficiency: {'work (runs)':>11} {'sim s':>6} {'execs only':>10}   {'CPU':>5}")
+    effs: dict[int, list[dict[str, float]]] = {}
     for r in rows:
-        rates = {k: r[k] / r["wall"] for k in ("sim_s", "runs", "execs")}
-        if base is not None:
-            eff = {k: rates[k] / (r["jobs"] * base[k] / base["wall"]) for k in rates}
-        else:
-            eff = {k: float("nan") for k in rates}
-        print(f"{r['jobs']:>4} {r['load'][0]:>5.2f} {r['execs']:>6} {r['runs']:>6} {r['sim_s']:>7.0f} {r['wall']:>7.1f} "
-              f"{rates['sim_s']:>8.1f} {3600 * rates['runs']:>8.0f} {3600 * rates['execs']:>8.0f}   "
-              f"{eff['sim_s']:>17.2f} {eff['runs']:>6.2f} {eff['execs']:>6.2f}")
-    print("efficiency = work rate at N jobs / (N x the rate at 1 job); work in simulated seconds (the headline), "
-          "in runs (executions + triage reruns), and in executions only; 'load' = the 1-minute load average "
-          "before the point (other work on the machine depresses N > 1)")
+        base = next((b for b in rows if b["jobs"] == 1 and b["rep"] == r["rep"]), None)
+        eff = efficiencies(r, base) if base else dict.fromkeys(("runs", "sim_s", "execs", "cpu"), float("nan"))
+        effs.setdefault(r["jobs"], []).append(eff)
+        print(f"{r['rep'] + 1:>5} {r['jobs']:>4} {r['load'][0]:>5.2f} {r['execs']:>6} {r['runs']:>6} {r['sim_s']:>7.0f} "
+              f"{r['wall']:>7.1f} {3600 * r['runs'] / r['wall']:>8.0f}   {'':>11} {eff['runs']:>11.2f} "
+              f"{eff['sim_s']:>6.2f} {eff['execs']:>10.2f}   {eff['cpu']:>5.2f}")
+    print("\nefficiency = the work rate at N jobs / (N x the rate at 1 job in the same round), over each campaign's "
+          "run (cluster start-up apart). Work (the headline) = runs: executions plus triage reruns (the careful "
+          "driver's replays, reproduction reruns, shrinking); 'sim s' weighs each run by the seconds it simulated; "
+          "'execs only' counts executions alone. CPU = runs per CPU second of all the campaign's processes "
+          "relative to 1 job: the campaign layer's CPU cost, which other users' load does not change. "
+          "load = the 1-minute load average before the point: others' work on the machine depresses N > 1 first.")
+    import statistics
+
+    for n, es in sorted(effs.items()):
+        if n == 1:
+            continue
+        med = {k: statistics.median(e[k] for e in es) for k in es[0]}
+        what = "median of " + str(len(es)) + " rounds" if len(es) > 1 else "1 round"
+        print(f"RESULT jobs={n}: efficiency {med['runs']:.2f} in work done (runs), {med['sim_s']:.2f} in simulated "
+              f"seconds, {med['execs']:.2f} in executions only; CPU {med['cpu']:.2f} ({what})")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--jobs", default="1,2", help="comma-separated job counts [1,2]")
     ap.add_argument("--budget", type=float, default=60.0, help="wall seconds per point [60]")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="rounds of all the job counts, interleaved (1,2,1,2,...): the median is printed [1]")
     ap.add_argument("--network", default=str(ROOT / "networks" / "town.net.xml"))
     args = ap.parse_args()
     counts = [int(x) for x in args.jobs.split(",")]
@@ -273,18 +319,24 @@ def main() -> None:
     n_seeds = max(len(seeds), max(counts))
     seeds = [seeds[i % len(seeds)] for i in range(n_seeds)]  # a repeated seed is its own job (own random streams)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    print(f"machine: {cores} cores; network {name}, {n_seeds} seed jobs, {args.budget:.0f} s per point; "
-          f"jobs {','.join(map(str, counts))}")
+    print(f"machine: {cores} cores; network {name}, {n_seeds} seed jobs, {args.budget:.0f} s per point, "
+          f"jobs {','.join(map(str, counts))}, {args.repeat} round(s)")
     if max(counts) > (cores or 1):
         print(f"NOTE: {max(counts)} jobs on {cores} cores: the jobs share cores, efficiency falls below 1 by design")
+    # this process runs the one-job points: warm it as a local cluster's workers are warmed before they register
+    from drivefuzz.campaign.job import warm_worker
+
+    warm_worker()
     workdir = Path(tempfile.mkdtemp(prefix="bench-scaling-"))
     rows = []
     try:
-        for n in counts:
-            r = run_point(n, seeds, args.budget, workdir)
-            rows.append(r)
-            print_point(r)
-            sys.stdout.flush()
+        for rep in range(args.repeat):
+            for n in counts:
+                r = run_point(n, seeds, args.budget, workdir, rep)
+                rows.append(r)
+                print_point(r)
+                sys.stdout.flush()
+                shutil.rmtree(workdir / f"jobs{n}-{rep}", ignore_errors=True)
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
     print_summary(rows)
