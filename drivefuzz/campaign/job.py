@@ -316,13 +316,14 @@ class SeedJob:
         candidates = [(rec, sc) for rec, sc in members
                       if not rec["finding"] and not rec.get("incident") and rec["risk"] is not None]
         values = [_feedback_value(rec, self.cfg.feedback) * schedule.weight(rec.get("situation"))
-                  for rec, _ in candidates]
+                  + schedule.cell_bonus(rec.get("cells")) for rec, _ in candidates]
         pick = pick_successor(values, self.cfg.feedback, rng)
         for (rec, sc), value in zip(candidates, values):
-            if schedule.is_new(rec.get("situation"), rec["risk"]):
+            if schedule.is_new(rec.get("situation"), rec["risk"], rec.get("cells")):
                 schedule.add_new(self._corpus_ref(sc), value, rec.get("hint"))
         schedule.observe([rec.get("situation") for rec, _ in members],
-                         [rec.get("situation") for rec, _ in members if rec["finding"]])
+                         [rec.get("situation") for rec, _ in members if rec["finding"]],
+                         [rec.get("cells") for rec, _ in members])
         if pick is None:
             return None, None, None
         rec, successor = candidates[pick]
@@ -334,6 +335,7 @@ class SeedJob:
         from drivefuzz.search.quality import score_trace
         from drivefuzz.search.risk import risk_score
         from drivefuzz.sim.simhost import OK
+        from drivefuzz.triage.coverage import execution_cells
         from drivefuzz.triage.signature import situation
 
         runs0, sim0 = runner.runs, runner.sim_s
@@ -353,6 +355,7 @@ class SeedJob:
                        risk_detail=r.as_dict())
             if self.cfg.feedback == "risk" and r.frame is not None and r.riskiest_actor is not None:
                 rec["situation"] = situation(scenario, ex.trace, store.rmap, r.frame, r.riskiest_actor)
+            rec["cells"] = execution_cells(scenario, ex.trace, store.rmap, r)  # interaction coverage
             t_store = time.perf_counter()
             if ex.misbehaviors:
                 m = ex.misbehaviors[0]

@@ -127,11 +127,16 @@ class RiskScore:
     frame: int | None = None  # the riskiest actor's riskiest moment (else the top component's)
     time: float | None = None  # [s] trace time of that frame
     n_frames: int = 0
+    #: every actor's extreme TTC, PET and gap with its frame: ``(actor, component, value, frame)`` where finite;
+    #: what interaction coverage (:mod:`drivefuzz.triage.coverage`) classifies. Not in :meth:`as_dict`.
+    encounters: tuple[tuple[str, str, float, int], ...] = ()
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-safe dict (plain floats, ints, strings and None)."""
+        """JSON-safe dict (plain floats, ints, strings and None), without :attr:`encounters`."""
         out: dict[str, Any] = {}
         for k, v in self.__dict__.items():
+            if k == "encounters":
+                continue
             if isinstance(v, dict):
                 out[k] = {str(a): _num(b) for a, b in v.items()}
             else:
@@ -543,6 +548,18 @@ def _extremes(acts: _Actors | None, ids: tuple[str, ...]):
     return raw, frames, who
 
 
+def _encounters(acts: _Actors | None, ids: tuple[str, ...]) -> tuple[tuple[str, str, float, int], ...]:
+    """``(actor, component, value, frame)`` of every finite per-actor TTC, PET and gap."""
+    if acts is None:
+        return ()
+    out = []
+    for c in ("ttc", "pet", "gap"):
+        vals, at = getattr(acts, c), getattr(acts, f"{c}_at")
+        for k in np.flatnonzero(np.isfinite(vals) & (at >= 0)):
+            out.append((ids[k], c, float(vals[k]), int(at[k])))
+    return tuple(out)
+
+
 def _riskiest(acts: _Actors | None, ids: tuple[str, ...], cfg: RiskConfig):
     """Per actor ``max_c w_c r_c`` (no baseline), and the riskiest actor's component and frame."""
     risk: dict[str, float] = {}
@@ -608,5 +625,5 @@ def risk_score(trace, config: RiskConfig | None = None, baseline: RiskScore | No
         harsh=float(raw["harsh"]), harsh_frame=frames["harsh"],
         risks=risks, contributions=contrib, actor_risk=actor_risk,
         riskiest_actor=riskiest, component=component, frame=frame,
-        time=None if frame is None else float(e["t"][frame]), n_frames=n,
+        time=None if frame is None else float(e["t"][frame]), n_frames=n, encounters=_encounters(acts, ids),
     )

@@ -20,6 +20,10 @@ decides where lineages start and when they end:
   for the situation of a finding already made. A member whose situation the job had never met, and whose
   risk reaches ``corpus_risk``, enters the corpus even when it is not chosen (AFL keeps an input that
   reaches new coverage). So energy goes to risky situations that have not yet turned into findings.
+- **Interaction coverage** (risk feedback only): every execution's close encounters are classified into
+  cells (:mod:`drivefuzz.triage.coverage`). A member whose cells include some the seed's job has not
+  reached gets :meth:`Schedule.cell_bonus` added to its value (``cell_bonus`` per new cell, at most
+  ``cell_bonus_max``), and enters the corpus whatever its risk: the search goes on from what moved coverage.
 
 With ``feedback="random"`` (the baseline) nothing here looks at the feedback: lineages run ``max_cycles``
 cycles and corpus entries are drawn uniformly, so that configurations differ only in what the feedback does.
@@ -50,6 +54,9 @@ class ScheduleConfig(BaseModel):
     novelty: float = Field(default=1.0, ge=0.0, description="extra weight of a situation never met (risk mode)")
     found_weight: float = Field(default=0.5, ge=0.0, description="weight of the situation of a finding made")
     corpus_risk: float = Field(default=0.3, ge=0.0, description="risk at which a new situation enters the corpus")
+    cell_bonus: float = Field(default=0.25, ge=0.0, description="value added per interaction-coverage cell the "
+                              "job had not reached (risk mode)")
+    cell_bonus_max: float = Field(default=0.75, ge=0.0, description="the most that new cells add to a value")
 
 
 @dataclass
@@ -83,12 +90,13 @@ class Schedule:
     lineages: int = 0  # lineages started so far
     seen: dict[str, int] = field(default_factory=dict)  # situation -> executions that met it
     found: list[str] = field(default_factory=list)  # situations of findings made
+    cells: dict[str, int] = field(default_factory=dict)  # interaction-coverage cell -> executions that reached it
 
     # ------------------------------------------------------------ state
     def to_json(self) -> dict[str, Any]:
         return {"mode": self.mode, "corpus": [asdict(e) for e in self.corpus],
                 "lineage": None if self.lineage is None else asdict(self.lineage), "lineages": self.lineages,
-                "seen": dict(self.seen), "found": list(self.found)}
+                "seen": dict(self.seen), "found": list(self.found), "cells": dict(self.cells)}
 
     @classmethod
     def from_json(cls, cfg: ScheduleConfig, data: dict[str, Any] | None, mode: str) -> "Schedule":
@@ -97,7 +105,8 @@ class Schedule:
         lin = data.get("lineage")
         return cls(cfg, mode, [Entry(**e) for e in data.get("corpus", [])],
                    None if lin is None else Lineage(**lin), int(data.get("lineages", 0)),
-                   {str(k): int(v) for k, v in data.get("seen", {}).items()}, [str(x) for x in data.get("found", [])])
+                   {str(k): int(v) for k, v in data.get("seen", {}).items()}, [str(x) for x in data.get("found", [])],
+                   {str(k): int(v) for k, v in data.get("cells", {}).items()})
 
     # ------------------------------------------------------------ behavioural coverage
     def weight(self, situation: str | None) -> float:
@@ -108,19 +117,36 @@ class Schedule:
             return self.cfg.found_weight
         return 1.0 + self.cfg.novelty / (1.0 + self.seen.get(situation, 0))
 
-    def is_new(self, situation: str | None, risk: float | None) -> bool:
-        """Whether an execution with ``situation`` and ``risk`` reached new coverage (see the module docstring)."""
+    def new_cells(self, cells: list[str] | None) -> int:
+        """How many of an execution's interaction-coverage ``cells`` the job has not reached (risk mode)."""
+        if self.mode != "risk" or not cells:
+            return 0
+        return sum(1 for c in cells if c not in self.cells)
+
+    def cell_bonus(self, cells: list[str] | None) -> float:
+        """The value added to a member for the cells it reached first (0 in the other modes)."""
+        return min(self.cfg.cell_bonus * self.new_cells(cells), self.cfg.cell_bonus_max)
+
+    def is_new(self, situation: str | None, risk: float | None, cells: list[str] | None = None) -> bool:
+        """Whether an execution with ``situation``, ``risk`` and ``cells`` reached new coverage (see the
+        module docstring)."""
+        if self.new_cells(cells):
+            return True
         return (self.mode == "risk" and bool(situation) and situation not in self.seen
                 and risk is not None and risk >= self.cfg.corpus_risk)
 
-    def observe(self, situations: list[str | None], found: list[str | None]) -> None:
-        """Count a population's situations (after its successor is chosen) and those of its findings."""
+    def observe(self, situations: list[str | None], found: list[str | None],
+                cells: list[list[str] | None] | None = None) -> None:
+        """Count a population's situations and cells (after its successor is chosen) and its findings' situations."""
         for s in situations:
             if s:
                 self.seen[s] = self.seen.get(s, 0) + 1
         for s in found:
             if s and s not in self.found:
                 self.found.append(s)
+        for member in cells or ():
+            for c in member or ():
+                self.cells[c] = self.cells.get(c, 0) + 1
 
     def add_new(self, ref: str, value: float, hint: str | None) -> None:
         """A member that reached new coverage enters the corpus (from the current lineage)."""

@@ -1,0 +1,384 @@
+"""Interaction coverage: which kinds of close encounter a campaign has created, and which it could create.
+
+Every execution's trace is read for its *close encounters*: per actor, an in-path time-to-collision
+under :data:`TTC_S`, a post-encroachment time under :data:`PET_S` or a body gap under :data:`GAP_M`
+(the per-actor extremes that :func:`drivefuzz.search.risk.risk_score` computes anyway), and tyre grip
+use over :data:`GRIP` (an encounter with no other party). Each encounter is classified at its frame
+(:func:`classify`) along six axes:
+
+- ``party``: ``vehicle/<approach>`` with approach ``ahead behind left right rear_left rear_right oncoming
+  crossing_left crossing_right``; ``pedestrian/<approach>`` with ``crossing_left crossing_right along``;
+  ``none/grip`` for grip use near the limit;
+- ``manoeuvre`` of the ego: ``cruise accelerate brake stop_go turn_left turn_right lane_change``, and
+  ``merge`` on a ramp, ``roundabout`` on a ring (where the element says so);
+- ``element`` and its control: ``edge``, ``signal/<phase at arrival: green amber red>``, ``priority``,
+  ``yield`` (yield or stop sign), ``roundabout``, ``ramp``;
+- ``speed`` band of the ego (:data:`SPEED_BANDS`) and the ``conditions`` (``fog wet wind low_sun
+  low_friction``, or ``clear``).
+
+The full cross product (10^4 cells, most of them impossible) is neither reachable nor readable, so an
+encounter counts in three *projections* (:data:`PROJECTIONS`): party x manoeuvre, party x element, speed x
+condition. A cell's key is ``"<projection>:<row>|<column>"``.
+
+:func:`reachable` derives the cells a network and its seeds' routes can offer at all (the mission is
+never mutated): no roundabout cells off a ring, no pedestrian cells without sidewalks or crossings on
+the route, no lane-change or side cells without a multi-lane edge, turns only where a route turns,
+speed bands up to the route's limits. It is an over-approximation (docs/coverage.md says where).
+
+Pure functions of Trace + Scenario + RoadMap (+ RiskScore); used by the fuzz job (each execution's
+cells go into its journal record), the schedule (novelty), ``drivefuzz coverage``, the status screen and
+the report. Units SI; headings radians ENU as in the trace.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+
+from drivefuzz.sim.world import sun_glare
+from drivefuzz.triage.evidence import actor_track, frames_before, lane_changed, to_local, wrap_angle
+from drivefuzz.triage.signature import element as signature_element
+
+TTC_S = 3.0  #: [s] in-path time-to-collision under this is a close encounter
+PET_S = 2.0  #: [s] post-encroachment time under this is one
+GAP_M = 1.5  #: [m] body gap under this is one
+GRIP = 0.85  #: [-] tyre friction use at or over this is an encounter with no other party
+WINDOW_S = 3.0  #: [s] before the encounter over which the ego's manoeuvre is read
+APPROACH_S = 2.0  #: [s] before the encounter at which the other party's approach is read
+TURN = math.radians(30.0)  #: [rad] heading change that makes a turn
+SAME_LANE_M = 1.8  #: [m] lateral offset within which a same-direction vehicle is ahead / behind
+#: (upper bound [m/s], name) of the ego's speed bands
+SPEED_BANDS: tuple[tuple[float, str], ...] = ((2.8, "0-10 km/h"), (8.3, "10-30 km/h"), (16.7, "30-60 km/h"),
+                                               (math.inf, "60+ km/h"))
+CONDITIONS = ("clear", "fog", "wet", "wind", "low_sun", "low_friction")
+FOG, WET, WIND = 30.0, 30.0, 40.0  #: weather levels (0-100) from which a condition counts
+LOW_MU = 0.6  #: [-] friction under an axle below this is a low-friction patch
+
+VEHICLE_APPROACHES = ("ahead", "behind", "left", "right", "rear_left", "rear_right", "oncoming",
+                      "crossing_left", "crossing_right")
+PEDESTRIAN_APPROACHES = ("crossing_left", "crossing_right", "along")
+PARTIES = tuple(f"vehicle/{a}" for a in VEHICLE_APPROACHES) + tuple(
+    f"pedestrian/{a}" for a in PEDESTRIAN_APPROACHES) + ("none/grip",)
+MANOEUVRES = ("cruise", "accelerate", "brake", "stop_go", "turn_left", "turn_right", "lane_change", "merge",
+              "roundabout")
+ELEMENTS = ("edge", "signal/green", "signal/amber", "signal/red", "priority", "yield", "roundabout", "ramp")
+#: projection name -> (row axis, column axis)
+PROJECTIONS: dict[str, tuple[str, str]] = {
+    "party-manoeuvre": ("party", "manoeuvre"),
+    "party-element": ("party", "element"),
+    "speed-condition": ("speed", "condition"),
+}
+AXIS_VALUES: dict[str, tuple[str, ...]] = {"party": PARTIES, "manoeuvre": MANOEUVRES, "element": ELEMENTS,
+                                           "speed": tuple(n for _, n in SPEED_BANDS), "condition": CONDITIONS}
+
+
+@dataclass(frozen=True)
+class Encounter:
+    """One close encounter, classified."""
+
+    actor: str | None  # None: grip use, no other party
+    frame: int
+    party: str
+    manoeuvre: str
+    element: str
+    speed: str
+    conditions: tuple[str, ...]
+
+    def cells(self) -> list[str]:
+        """Its cell keys, one per projection (speed x condition: one per condition)."""
+        out = [f"party-manoeuvre:{self.party}|{self.manoeuvre}", f"party-element:{self.party}|{self.element}"]
+        out += [f"speed-condition:{self.speed}|{c}" for c in self.conditions]
+        return out
+
+
+# ------------------------------------------------------------------------------------------- encounters
+def close_encounters(risk) -> list[tuple[str | None, int]]:
+    """``(actor, frame)`` of every close encounter in a :class:`~drivefuzz.search.risk.RiskScore`: per actor
+    the most severe of its qualifying TTC / PET / gap (value over threshold, smallest first), then grip."""
+    best: dict[str, tuple[float, int]] = {}
+    limits = {"ttc": TTC_S, "pet": PET_S, "gap": GAP_M}
+    for actor, comp, value, frame in getattr(risk, "encounters", ()):
+        sev = value / limits[comp]
+        if sev < 1.0 and (actor not in best or sev < best[actor][0]):
+            best[actor] = (sev, frame)
+    out: list[tuple[str | None, int]] = [(a, f) for a, (_, f) in sorted(best.items())]
+    if risk.grip is not None and risk.grip >= GRIP and risk.grip_frame is not None:
+        out.append((None, int(risk.grip_frame)))
+    return out
+
+
+def execution_cells(scenario, trace, rmap, risk) -> list[str]:
+    """The sorted, distinct cells of one execution's close encounters (what its journal record keeps)."""
+    if trace is None or trace.n_frames == 0:
+        return []
+    cells: set[str] = set()
+    for actor, f in close_encounters(risk):
+        cells.update(classify(scenario, trace, rmap, actor, f).cells())
+    return sorted(cells)
+
+
+def classify(scenario, trace, rmap, actor: str | None, f: int) -> Encounter:
+    """Classify the encounter with ``actor`` (None: grip) at frame ``f`` (see the module docstring)."""
+    f = min(max(int(f), 0), trace.n_frames - 1)
+    elem = element(scenario, trace, rmap, f)
+    return Encounter(actor, f, party(trace, actor, f), manoeuvre(trace, f, elem), elem,
+                     speed_band(float(trace["speed"][f])), conditions(scenario, trace, f))
+
+
+def party(trace, actor: str | None, f: int) -> str:
+    """``<kind>/<approach>`` of the other party, read :data:`APPROACH_S` s before ``f`` (or when it appeared)."""
+    if actor is None:
+        return "none/grip"
+    track = actor_track(trace, actor)
+    if track is None:
+        return "none/grip"
+    k0 = max(f - int(round(APPROACH_S / trace.step_length)), 0)
+    k = next((j for j in range(k0, f + 1) if track.present(j)), f)
+    lx, ly = to_local(trace, k, float(track.x[k]), float(track.y[k]))
+    dh = abs(wrap_angle(float(track.heading[k]) - float(trace["heading"][k])))
+    moving = float(track.speed[k]) > 0.5
+    side = "left" if ly > 0 else "right"
+    if track.kind == "pedestrian":
+        across = moving and math.pi / 4 < dh < 3 * math.pi / 4
+        return f"pedestrian/crossing_{side}" if across else "pedestrian/along"
+    if moving and dh >= 3 * math.pi / 4:
+        return "vehicle/oncoming"
+    if moving and dh > math.pi / 4:
+        return f"vehicle/crossing_{side}"
+    if abs(ly) < SAME_LANE_M:
+        return "vehicle/ahead" if lx > 0 else "vehicle/behind"
+    half = 0.5 * float(trace.meta.get("ego_length") or 4.6)
+    return f"vehicle/rear_{side}" if lx < -half else f"vehicle/{side}"
+
+
+def manoeuvre(trace, f: int, elem: str) -> str:
+    """The ego's manoeuvre over the :data:`WINDOW_S` s up to ``f``; ``merge`` / ``roundabout`` on those elements."""
+    speed = trace["speed"]
+    w = frames_before(trace, f, WINDOW_S)
+    base = "cruise"
+    if float(np.min(speed[w])) < 0.5:
+        base = "stop_go"
+    else:
+        heading = np.unwrap(np.asarray(trace["heading"][w], dtype=float))
+        turn = float(heading[-1] - heading[0]) if len(heading) > 1 else 0.0
+        if abs(turn) >= TURN:
+            base = "turn_left" if turn > 0 else "turn_right"
+        elif lane_changed(trace, f, WINDOW_S):
+            base = "lane_change"
+        else:
+            ax = trace["ax"][frames_before(trace, f, 1.0)]
+            mean = float(np.nanmean(ax)) if len(ax) else 0.0
+            base = "brake" if mean < -1.0 else "accelerate" if mean > 0.7 else "cruise"
+    if elem == "ramp" and base in ("cruise", "accelerate", "lane_change", "turn_left", "turn_right"):
+        return "merge"
+    if elem == "roundabout" and base in ("cruise", "accelerate", "turn_left", "turn_right"):
+        return "roundabout"
+    return base
+
+
+def element(scenario, trace, rmap, f: int) -> str:
+    """The road element of the ego at ``f``: roundabout or ramp where the network says so, else the
+    junction control of the signature's element (the link crossed or approached), else ``edge``."""
+    feats = _features(rmap)
+    lane = str(trace["lane"][f])
+    edge = lane.rsplit("_", 1)[0] if lane else ""
+    if lane.startswith(":"):
+        if edge.lstrip(":").rsplit("_", 1)[0] in feats["ring_nodes"]:
+            return "roundabout"
+    elif edge in feats["ring_edges"]:
+        return "roundabout"
+    elif edge in feats["ramp_edges"]:
+        return "ramp"
+    cls = signature_element(scenario, trace, rmap, f).split("/", 1)[1]
+    if cls == "traffic_light":
+        return f"signal/{_phase(trace, f)}"
+    return {"priority": "priority", "yield": "yield", "stop": "yield"}.get(cls, "edge")
+
+
+def _phase(trace, f: int) -> str:
+    """The ego's light at arrival: its state at the last frame before it entered the junction."""
+    lanes, states = trace["lane"], trace["tls_state"]
+    k = f
+    while k > 0 and str(lanes[k]).startswith(":"):
+        k -= 1
+    s = str(states[k])[:1]
+    if s and s in "yY":
+        return "amber"
+    return "red" if s and s in "rRu" else "green"
+
+
+def speed_band(v: float) -> str:
+    return next(name for top, name in SPEED_BANDS if v < top)
+
+
+def conditions(scenario, trace, f: int) -> tuple[str, ...]:
+    """The conditions at ``f`` (``clear`` when none)."""
+    w = scenario.weather
+    out = []
+    if w.fog >= FOG:
+        out.append("fog")
+    if max(w.rain, w.wetness) >= WET:
+        out.append("wet")
+    if w.wind >= WIND:
+        out.append("wind")
+    if sun_glare(w, float(trace["heading"][f])):
+        out.append("low_sun")
+    if scenario.puddles:
+        win = frames_before(trace, f, 2.0)
+        mu = np.fmin(np.asarray(trace["mu_front"][win], dtype=float), np.asarray(trace["mu_rear"][win], dtype=float))
+        if np.any(mu < LOW_MU):
+            out.append("low_friction")
+    return tuple(out) or ("clear",)
+
+
+# ------------------------------------------------------------------------------------------- the network
+@lru_cache(maxsize=16)
+def _features(rmap) -> dict[str, frozenset[str]]:
+    """Ring edges and nodes (SUMO's roundabouts) and ramp edges (edge type containing ``ramp``)."""
+    ring_edges, ring_nodes = set(), set()
+    for rb in rmap.net.getRoundabouts():
+        ring_edges.update(rb.getEdges())
+        ring_nodes.update(rb.getNodes())
+    ramps = {e.getID() for e in rmap.net.getEdges(withInternal=False) if "ramp" in (e.getType() or "").lower()}
+    return {"ring_edges": frozenset(ring_edges), "ring_nodes": frozenset(ring_nodes), "ramp_edges": frozenset(ramps)}
+
+
+def reachable(rmap, scenarios: Iterable) -> list[str]:
+    """The cells that the network of ``rmap`` and these seeds' routes can offer (sorted keys)."""
+    r = _route_features(rmap, scenarios)
+    vehicle = ["ahead", "behind"]
+    if r["multilane"]:
+        vehicle += ["left", "right", "rear_left", "rear_right"]
+    if r["oncoming"]:
+        vehicle.append("oncoming")
+    if r["crossing"]:
+        vehicle += ["crossing_left", "crossing_right"]
+    parties = [f"vehicle/{a}" for a in vehicle] + ["none/grip"]
+    if r["sidewalk"] or r["crossings"]:
+        parties += ["pedestrian/crossing_left", "pedestrian/crossing_right", "pedestrian/along"]
+    mans = ["cruise", "accelerate", "brake", "stop_go"] + sorted(r["turns"])
+    if r["multilane"]:
+        mans.append("lane_change")
+    elements = sorted(r["elements"])
+    if "ramp" in elements:
+        mans.append("merge")
+    if "roundabout" in elements:
+        mans.append("roundabout")
+    cells = [f"party-manoeuvre:{p}|{m}" for p in parties for m in mans]
+    for p in parties:
+        for e in elements:
+            if p.startswith("vehicle/crossing") and e in ("edge", "ramp"):
+                continue  # crossing traffic meets the ego where roads meet
+            if p == "vehicle/oncoming" and e in ("ramp", "roundabout"):
+                continue  # one-way roads
+            if p.startswith("pedestrian/") and e in ("ramp", "roundabout") and not r["sidewalk"]:
+                continue
+            cells.append(f"party-element:{p}|{e}")
+    bands = [name for top, name in SPEED_BANDS]
+    bands = bands[:next(i for i, (top, _) in enumerate(SPEED_BANDS) if r["vmax"] * 1.1 < top) + 1]
+    cells += [f"speed-condition:{b}|{c}" for b in bands for c in CONDITIONS]
+    return sorted(cells)
+
+
+def _route_features(rmap, scenarios: Iterable) -> dict[str, Any]:
+    """What the seeds' routes pass: elements, turns, multi-lane edges, opposite traffic, crossings, sidewalks."""
+    feats = _features(rmap)
+    out: dict[str, Any] = {"elements": {"edge"}, "turns": set(), "multilane": False, "oncoming": False,
+                           "crossing": False, "sidewalk": False, "crossings": False, "vmax": 0.0}
+    for sc in scenarios:
+        route = rmap.route(sc.mission.start_edge, sc.mission.goal_edge) or (sc.mission.start_edge,)
+        for i, eid in enumerate(route):
+            edge = rmap.edge(eid)
+            lanes = edge.getLanes()
+            drive = [ln for ln in lanes if ln.allows("passenger")]
+            out["multilane"] |= len(drive) >= 2
+            out["sidewalk"] |= any(ln.allows("pedestrian") and not ln.allows("passenger") for ln in lanes)
+            out["vmax"] = max(out["vmax"], max((ln.getSpeed() for ln in drive), default=0.0))
+            out["oncoming"] |= _has_opposite(edge)
+            if eid in feats["ring_edges"]:
+                out["elements"].add("roundabout")
+            if eid in feats["ramp_edges"]:
+                out["elements"].add("ramp")
+            node = edge.getToNode()
+            out["crossings"] |= node.getID() in _crossing_nodes(rmap)
+            if i + 1 < len(route):
+                _link_features(rmap, edge, rmap.edge(route[i + 1]), node, out)
+    return out
+
+
+def _has_opposite(edge) -> bool:
+    """A road the other way between the same two nodes."""
+    return any(o.getToNode() == edge.getFromNode() for o in edge.getToNode().getOutgoing())
+
+
+@lru_cache(maxsize=16)
+def _crossing_nodes(rmap) -> frozenset[str]:
+    """Nodes with a pedestrian crossing (a crossing's id is ``:<node>_c<n>``)."""
+    return frozenset(e.getID()[1:].rsplit("_", 1)[0] for e in rmap.net.getEdges(withInternal=True)
+                     if e.getFunction() == "crossing")
+
+
+def _link_features(rmap, edge, nxt, node, out: dict[str, Any]) -> None:
+    """What the route's link from ``edge`` to ``nxt`` at ``node`` offers: control, turn, crossing traffic."""
+    from drivefuzz.triage.signature import right_of_way
+
+    conns = [c for c in edge.getConnections(nxt) if c.getFromLane().allows("passenger")]
+    for c in conns:
+        cls = right_of_way(c)
+        if cls == "traffic_light":
+            out["elements"].update(("signal/green", "signal/amber", "signal/red"))
+        elif cls in ("priority", "yield", "stop"):
+            out["elements"].add("yield" if cls == "stop" else cls)
+        d = c.getDirection()
+        if d in ("l", "L") and edge.getID() not in _features(rmap)["ring_edges"]:
+            out["turns"].add("turn_left")
+        if d in ("r", "R") and edge.getID() not in _features(rmap)["ring_edges"]:
+            out["turns"].add("turn_right")
+    # crossing traffic: another road for cars enters the node at 45-135 degrees to the route's (a ramp
+    # merging at a shallow angle comes from the side, not across)
+    h = _end_heading(edge)
+    for e in node.getIncoming():
+        if e.getID() != edge.getID() and rmap.is_normal_edge(e) and e.allows("passenger"):
+            if math.pi / 4 < abs(wrap_angle(_end_heading(e) - h)) < 3 * math.pi / 4:
+                out["crossing"] = True
+
+
+def _end_heading(edge) -> float:
+    """[rad] ENU heading of an edge's last shape segment."""
+    pts = edge.getShape()
+    (x0, y0), (x1, y1) = pts[-2][:2], pts[-1][:2]
+    return math.atan2(y1 - y0, x1 - x0)
+
+
+# ------------------------------------------------------------------------------------------- a campaign
+def summarise(records: Iterable[Mapping[str, Any]], reach: Iterable[str]) -> dict[str, Any]:
+    """A campaign's coverage from its journal records: per cell how often it was reached, and in how many
+    executions that produced a finding or an incident; reachable, reached, unreached; per projection too."""
+    reach = sorted(set(reach))
+    hits: dict[str, dict[str, int]] = {}
+    for rec in records:
+        for c in rec.get("cells") or ():
+            h = hits.setdefault(c, {"count": 0, "findings": 0, "incidents": 0})
+            h["count"] += 1
+            h["findings"] += bool(rec.get("finding"))
+            h["incidents"] += bool(rec.get("incident"))
+    reached = [c for c in reach if c in hits]
+    per = {}
+    for name in PROJECTIONS:
+        r = [c for c in reach if c.startswith(name + ":")]
+        per[name] = {"reachable": len(r), "reached": sum(1 for c in r if c in hits)}
+    return {"reachable": len(reach), "reached": len(reached),
+            "share": round(len(reached) / len(reach), 4) if reach else 0.0,
+            "projections": per, "cells": {c: hits.get(c, {"count": 0, "findings": 0, "incidents": 0}) for c in reach},
+            "outside": {c: h for c, h in sorted(hits.items()) if c not in set(reach)}}
+
+
+def split(cell: str) -> tuple[str, str, str]:
+    """(projection, row, column) of a cell key."""
+    proj, rest = cell.split(":", 1)
+    row, col = rest.split("|", 1)
+    return proj, row, col
