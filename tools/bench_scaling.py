@@ -239,26 +239,59 @@ def print_point(p: dict) -> None:
     if p["tail"] is not None:
         print(f"    the budget ran out {p['tail']:.1f} s before the last job returned (its running execution and "
               f"triage finish first)")
-    cols = sorted(p["stages"], key=lambda pid: p["names"].get(pid, str(pid)))
-    heads = [p["names"].get(pid, f"pid {pid}") for pid in cols]
+    print_stages(p)
+    print_cpu(p)
+
+
+def _columns(p: dict) -> list[tuple[str, list[float]]]:
+    """(heading, a figure per stage, then in and outside executions) per job-running process; with more
+    than four of them, the mean, the least and the most over the workers instead."""
+    per = []
+    for pid in sorted(p["stages"], key=lambda pid: p["names"].get(pid, str(pid))):
+        st = p["stages"][pid]
+        figures = [sum(st.get(k, 0.0) for k, _ in STAGES[:8])] + [st.get(k, 0.0) for k, _ in STAGES]
+        inside = sum(st.values())
+        per.append((p["names"].get(pid, f"pid {pid}"), figures + [inside, p["wall"] - inside]))
+    if len(per) <= 4:
+        return per
+    rows = list(zip(*(f for _, f in per)))
+    return [(f"mean of {len(per)}", [sum(r) / len(r) for r in rows]), ("least", [min(r) for r in rows]),
+            ("most", [max(r) for r in rows])]
+
+
+def print_stages(p: dict) -> None:
+    cols = _columns(p)
+    labels = [label for _, label in STAGES[:8]] + ["  (the above: in the simulation host)"] + \
+        [label for _, label in STAGES[8:]] + ["in executions", "outside executions (set-up, Dask, idle)"]
+    order = list(range(1, 9)) + [0] + list(range(9, len(STAGES) + 1)) + [len(STAGES) + 1, len(STAGES) + 2]
     print(f"  where each job-running process spent its wall time [s] ({p['wall']:.1f} s each):")
-    print(f"    {'stage':<42}" + "".join(f"{h:>18}" for h in heads))
-    for key, label in STAGES:
-        if key == "isolation":
-            print(f"    {'  (the above in the simulation host)':<42}"
-                  + "".join(f"{sum(p['stages'][c].get(k, 0.0) for k, _ in STAGES[:8]):>18.2f}" for c in cols))
-        print(f"    {label:<42}" + "".join(f"{p['stages'][c].get(key, 0.0):>18.2f}" for c in cols))
-    inside = [sum(p["stages"][c].values()) for c in cols]
-    print(f"    {'in executions':<42}" + "".join(f"{v:>18.2f}" for v in inside))
-    print(f"    {'outside executions (set-up, Dask, idle)':<42}" + "".join(f"{p['wall'] - v:>18.2f}" for v in inside))
+    print(f"    {'stage':<42}" + "".join(f"{h:>18}" for h, _ in cols))
+    for label, i in zip(labels, order):
+        print(f"    {label:<42}" + "".join(f"{f[i]:>18.2f}" for _, f in cols))
+
+
+def print_cpu(p: dict) -> None:
     print(f"  CPU time of each process [s] (share of the {p['wall']:.1f} s):")
-    for pid, (role, cpu) in sorted(p["cpu"].items(), key=lambda kv: kv[1][0]):
-        if cpu < 0.005:
-            continue
-        print(f"    {role:<48}{cpu:>8.2f}  {100 * cpu / p['wall']:>5.1f} %")
+    procs = sorted((role, cpu) for role, cpu in p["cpu"].values() if cpu >= 0.005)
+    if p["jobs"] > 4:  # one line per kind of process
+        kinds: dict[str, list[float]] = {}
+        for role, cpu in procs:
+            kind = ("workers" if role.startswith("worker") else "their simulation hosts"
+                    if role.startswith("simulation host of worker") else role)
+            kinds.setdefault(kind, []).append(cpu)
+        for kind, cpus in kinds.items():
+            spread = f"  (each {min(cpus):.2f} to {max(cpus):.2f})" if len(cpus) > 1 else ""
+            print(f"    {kind + (f' ({len(cpus)})' if len(cpus) > 1 else ''):<48}{sum(cpus):>8.2f}  "
+                  f"{100 * sum(cpus) / p['wall']:>5.1f} %{spread}")
+    else:
+        for role, cpu in procs:
+            print(f"    {role:<48}{cpu:>8.2f}  {100 * cpu / p['wall']:>5.1f} %")
     for name, cpu in p["threads"].items():
         print(f"      campaign process, {name:<56}{cpu:>8.2f}")
-    for worker, split in sorted(p.get("worker_threads", {}).items()):
+    splits = sorted(p.get("worker_threads", {}).items())
+    if len(splits) > 4:
+        splits = [(f"workers (sum of {len(splits)})", {k: sum(s[k] for _, s in splits) for k in splits[0][1]})]
+    for worker, split in splits:
         for name, cpu in split.items():
             print(f"      {worker}, {name:<64}{cpu:>8.2f}")
     secs, calls = p["poll"]
