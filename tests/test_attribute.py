@@ -366,6 +366,31 @@ def test_a_car_that_enters_the_ring_without_yielding_is_kept_clear_of_by_a_caref
     assert v.reason.startswith("the vehicle v1 came from Nin_0, a link that must yield") and "a careful driver avoided it" in v.reason
 
 
+@pytest.mark.parametrize("name, how", [
+    ("walker_into_the_side_of_a_car_that_did_not_predict_her", "walked into the ego's right side"),
+    ("walker_steps_into_the_path_of_a_car_that_did_not_predict_her", "entered the ego's path 3.4 m ahead"),
+])
+def test_a_walker_an_ads_did_not_predict_is_its_fault_when_a_careful_driver_keeps_clear(tmp_path, name, how):
+    """Two events of a campaign of the reference ADS with its ``no_walker_prediction`` fault (issue 31), kept as
+    data: the ADS takes no account of where a crossing walker is going, and meets her. The pedestrian rule excuses
+    it (she walked into its side; she stepped out inside its stopping distance, measured at the speed its bug
+    chose), and before issue 31 that decided ``other``: the clean ADS does not meet her at all. The careful
+    driver's replay, which yields to her predicted line, keeps clear: the ego's, under pedestrian_avoidable."""
+    sc, ex = kept_case(tmp_path, name)
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.kind) == ("collision", "pedestrian") and sc.ads.options["fault"] == "no_walker_prediction"
+    rmap = load_roadmap(NET)
+    rules = attribute(sc, ex.trace, m, rmap)
+    assert rules.fault is Fault.OTHER and rules.rule == "pedestrian" and how in rules.reason  # the old verdict
+    v = attribute(sc, ex.trace, m, rmap, replay=_careful_replay)
+    assert v.fault is Fault.EGO and v.rule == "pedestrian_avoidable", v.reason
+    cf = v.evidence["counterfactual"]
+    assert cf["excuse"] == "pedestrian" and not cf["same_failure"] and cf["careful_closest"] <= 15.0
+    assert v.reason.startswith(rules.reason + ", but a careful driver avoided it: it came no closer to")
+    clean = execute(sc.model_copy(update={"ads": AdsSpec(name="ego")}), oracles=oracles())
+    assert not [c for c in clean.misbehaviors if c.actors == m.actors]  # the clean ADS never meets her
+
+
 @pytest.mark.parametrize("name, rule, same, says", [
     ("stuck_mid_turn_behind_a_queue", "blocked", True, "a careful driver could not avoid it either"),
     ("stalled_across_two_lanes", "blocked", True, "a careful driver could not avoid it either"),
@@ -508,6 +533,9 @@ def test_a_walker_who_walks_into_the_car_that_stopped_for_him_is_at_fault(tmp_pa
     assert max(speed[m.frame - 7:m.frame + 1]) <= 0.1 < max(speed[m.frame - 10:m.frame + 1])  # at rest 0.35 s
     v = attribute(sc, ex.trace, m, load_roadmap(net))
     assert v.fault is Fault.OTHER and v.rule == "stationary_struck", v.reason
+    # a walker into a standing ego is one incident, whichever way she came and wherever she struck
+    sig = signature(sc, ex.trace, m, load_roadmap(net), v)
+    assert (sig.approach, sig.contact_side, sig.maneuver) == ("any", "any", "stationary")
 
 
 def test_a_car_that_stopped_in_a_walkers_path_is_the_egos_when_a_careful_driver_stops_short(tmp_path):

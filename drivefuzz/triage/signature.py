@@ -19,6 +19,8 @@ happened: no actor IDs (they are counters), no positions, no element IDs. Its fi
 - ``approach``: where the other party came from relative to the ego's heading
   :data:`APPROACH_BEFORE` s before the event (``behind``/``ahead``/``left``/``right``/``oncoming``);
 - ``contact_side``: the side of the ego that was hit (``front``/``rear``/``left``/``right``/``none``);
+  a walker who walked into a standing ego (rule ``stationary_struck``) has approach and side ``any``: one
+  incident, however she came;
 - ``fault``: the attribution's verdict.
 
 ``key`` is a short stable hash of the fields; ``label`` a one-line description.
@@ -101,9 +103,13 @@ def signature(scenario, trace, misbehavior, rmap, attribution: Attribution) -> S
             appr = approach(trace, f, track, APPROACH_BEFORE)
             if misbehavior.oracle == "collision":
                 side = contact_side(contact_point(trace, f, track))
+    moved = maneuver(trace, f) if n else "none"
+    if attribution.rule == "stationary_struck" and other_kind == "pedestrian":
+        # a walker into a standing ego (an incident): one signature, whichever way she came and wherever she struck
+        appr, side, moved = "any", "any", "stationary"
     return Signature(
         oracle=misbehavior.oracle, kind=misbehavior.kind,
-        maneuver=maneuver(trace, f) if n else "none",
+        maneuver=moved,
         element=element(scenario, trace, rmap, f) if n else "none",
         other_kind=other_kind, other_nav=other_nav, approach=appr, contact_side=side,
         fault=attribution.fault.value,
