@@ -992,6 +992,24 @@ def findings_cmd(out, as_json, incidents):
         click.echo(format_table(extra, "incidents (not the ego's fault)"))
 
 
+@main.command("coverage")
+@click.argument("out", type=click.Path())
+@click.option("--json", "as_json", is_flag=True, help="Print the coverage as JSON (as OUT/coverage.json holds it).")
+@handle_errors
+def coverage_cmd(out, as_json):
+    """Print a campaign's interaction coverage: the cells its seeds can offer, how often each was reached,
+    which produced findings (F) or incidents (I), and those never reached (writes OUT/coverage.json)."""
+    from drivefuzz.triage.coverage import campaign_coverage, format_coverage
+    from drivefuzz.triage.table import check_campaign_dir
+
+    out_dir = check_campaign_dir(out)
+    if not (out_dir / "manifest.json").is_file():
+        raise InvalidConfig(str(out_dir), None, "no manifest.json: coverage needs the campaign's seeds",
+                            "a directory written by 'drivefuzz fuzz -o OUT'")
+    cov = campaign_coverage(out_dir)
+    click.echo(json.dumps(cov, indent=2) if as_json else format_coverage(cov))
+
+
 @main.command("report")
 @click.argument("out", type=click.Path())
 @click.option("-o", "html_out", type=click.Path(dir_okay=False), help="The HTML file [OUT/report.html]; report.md beside it.")

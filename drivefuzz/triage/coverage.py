@@ -32,9 +32,11 @@ the report. Units SI; headings radians ENU as in the trace.
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import numpy as np
@@ -382,3 +384,98 @@ def split(cell: str) -> tuple[str, str, str]:
     proj, rest = cell.split(":", 1)
     row, col = rest.split("|", 1)
     return proj, row, col
+
+
+# ------------------------------------------------------------------------------------------- a campaign folder
+COVERAGE_FILE = "coverage.json"
+
+
+def campaign_reachable(out: Path) -> list[str]:
+    """The reachable cells of the campaign in ``out``: from its manifest's seeds and their network."""
+    from drivefuzz.scenario.roadmap import load_roadmap
+    from drivefuzz.scenario.sumofiles import load_scenario
+
+    manifest = json.loads((out / "manifest.json").read_text())
+    seeds = [load_scenario(out / s) for s in manifest.get("seeds", [])]
+    if not seeds:
+        return []
+    return reachable(load_roadmap(seeds[0].network_path()), seeds)
+
+
+class JournalCells:
+    """The cells of a campaign's executions, read from its jobs' journals (``jobs/*/journal.jsonl``), each
+    execution once (a job re-run after a kill journals some twice); :meth:`update` reads only what is new."""
+
+    def __init__(self, out: str | Path):
+        self.out = Path(out)
+        self.records: dict[str, dict[str, Any]] = {}
+        self._offsets: dict[Path, int] = {}
+
+    def update(self) -> int:
+        """Read the journals' new complete lines; return how many new executions."""
+        new = 0
+        for path in sorted((self.out / "jobs").glob("*/journal.jsonl")):
+            offset = self._offsets.get(path, 0)
+            try:
+                with open(path, "rb") as fh:
+                    fh.seek(offset)
+                    data = fh.read()
+            except OSError:
+                continue
+            end = data.rfind(b"\n") + 1
+            self._offsets[path] = offset + end
+            for line in data[:end].splitlines():
+                try:
+                    rec = json.loads(line)
+                except (ValueError, RecursionError):
+                    continue
+                if isinstance(rec, dict) and rec.get("event") == "end" and isinstance(rec.get("key"), str) \
+                        and rec["key"] not in self.records:
+                    self.records[rec["key"]] = {"cells": [c for c in rec.get("cells") or () if isinstance(c, str)],
+                                                "finding": rec.get("finding"), "incident": rec.get("incident")}
+                    new += 1
+        return new
+
+    def reached(self) -> set[str]:
+        return {c for r in self.records.values() for c in r["cells"]}
+
+
+def campaign_coverage(out: str | Path, write: bool = True) -> dict[str, Any]:
+    """The coverage of the campaign in ``out``, summed over every execution in its journals (a resumed
+    campaign's too), as :func:`summarise` gives it with ``executions``; written to ``out/coverage.json``."""
+    from drivefuzz.storage import atomic_write_json
+
+    out = Path(out)
+    journals = JournalCells(out)
+    journals.update()
+    cov = summarise(journals.records.values(), campaign_reachable(out))
+    cov["executions"] = len(journals.records)
+    cov["with_cells"] = sum(1 for r in journals.records.values() if r["cells"])
+    if write:
+        atomic_write_json(out / COVERAGE_FILE, cov)
+    return cov
+
+
+def format_coverage(cov: Mapping[str, Any]) -> str:
+    """``drivefuzz coverage``'s text: the totals, then per projection the reached cells (how often, with
+    findings F and incidents I) and the cells never reached."""
+    lines = [f"coverage {cov['reached']}/{cov['reachable']} cells ({100.0 * cov['share']:.0f} %) over "
+             f"{cov.get('executions', 0)} executions ({cov.get('with_cells', 0)} with a close encounter)"]
+    cells = cov["cells"]
+    for name, (row_axis, col_axis) in PROJECTIONS.items():
+        p = cov["projections"][name]
+        lines.append("")
+        lines.append(f"{row_axis} x {col_axis}: {p['reached']}/{p['reachable']} reached")
+        mine = [(c, h) for c, h in cells.items() if c.startswith(name + ":")]
+        for c, h in sorted(mine, key=lambda ch: -ch[1]["count"]):
+            if h["count"]:
+                marks = "".join(f"  {k[0].upper()}{h[k]}" for k in ("findings", "incidents") if h[k])
+                lines.append(f"  {h['count']:6d}  {c.split(':', 1)[1]}{marks}")
+        never = [c.split(":", 1)[1] for c, h in mine if not h["count"]]
+        if never:
+            lines.append(f"  never reached ({len(never)}): " + ", ".join(never))
+    if cov.get("outside"):
+        lines.append("")
+        lines.append("reached but not derived as reachable (the derivation under-estimates here): "
+                     + ", ".join(f"{c} ({h['count']})" for c, h in cov["outside"].items()))
+    return "\n".join(lines)
