@@ -533,8 +533,22 @@ def _print_summary(campaign, findings, out_dir, report_all: bool = False) -> Non
         click.echo(f"job for seed {si} failed: {why}; its executions so far are saved, --resume retries it", err=True)
     if campaign.stop_reason:
         click.echo(f"why it stopped: {campaign.stop_reason}", err=True)
+    _write_coverage(out_dir)
     if p.jobs_done < p.jobs_total:
         click.echo(f"stopped; continue with: drivefuzz fuzz --resume {out_dir}", err=True)
+
+
+def _write_coverage(out_dir) -> None:
+    """OUT/coverage.json, summed over every run of the campaign, and its figure in one line."""
+    from drivefuzz.triage.coverage import campaign_coverage
+
+    try:
+        cov = campaign_coverage(out_dir)
+    except (DriveFuzzError, OSError, ValueError) as exc:
+        click.echo(f"coverage: not written ({exc})", err=True)
+        return
+    click.echo(f"coverage {cov['reached']}/{cov['reachable']} cells ({100.0 * cov['share']:.0f} %); "
+               f"drivefuzz coverage {out_dir} lists them", err=True)
 
 
 def _print_findings(title: str, findings) -> None:

@@ -42,6 +42,7 @@ class Status:
     busy: int  # workers running a job now
     workers: int | None  # workers there are (None: a scheduler's, not known here)
     jobs: str  # "3/8 done"
+    coverage: str = "-"  # interaction coverage: "N/M cells (P %)" (drivefuzz.triage.coverage)
 
 
 def read_status(campaigns: Sequence[Any], workers: int | None) -> Status:
@@ -62,7 +63,33 @@ def read_status(campaigns: Sequence[Any], workers: int | None) -> Status:
         findings=tuple((f.label, f.hits) for f in found), incidents=sum(len(c.incidents) for c in campaigns),
         last_finding=newest.last_finding if newest is not None else None,
         busy=sum(p.jobs_running for p in ps), workers=workers,
-        jobs=f"{sum(p.jobs_done for p in ps)}/{sum(p.jobs_total for p in ps)} done")
+        jobs=f"{sum(p.jobs_done for p in ps)}/{sum(p.jobs_total for p in ps)} done",
+        coverage=_coverage(campaigns))
+
+
+_COVERAGE: dict[int, tuple[Any, Any, int]] = {}  # id(campaign) -> (campaign, its JournalCells, reachable cells)
+
+
+def _coverage(campaigns: Sequence[Any]) -> str:
+    """"N/M cells (P %)": the interaction-coverage cells reached of those the seeds offer (a batch: summed),
+    read from the journals incrementally; "-" where it cannot be read (no seeds, a network that does not load)."""
+    reached = total = 0
+    for c in campaigns:
+        try:
+            entry = _COVERAGE.get(id(c))
+            if entry is None or entry[0] is not c:
+                from drivefuzz.scenario.roadmap import load_roadmap
+                from drivefuzz.triage.coverage import JournalCells, reachable
+
+                cells = set(reachable(load_roadmap(c.seeds[0].network_path()), c.seeds)) if c.seeds else set()
+                entry = _COVERAGE[id(c)] = (c, JournalCells(c.out), cells)
+            _, journals, cells = entry
+            journals.update()
+            reached += len(journals.reached() & cells)
+            total += len(cells)
+        except Exception:  # noqa: BLE001 - the screen shows what it can; `drivefuzz coverage` reports errors
+            continue
+    return f"{reached}/{total} cells ({100.0 * reached / total:.0f} %)" if total else "-"
 
 
 def _remaining(campaigns: Sequence[Any]) -> str:
@@ -84,7 +111,7 @@ def plain_line(s: Status) -> str:
     last = f"  last: {s.last_finding}" if s.last_finding else ""
     return (f"elapsed {format_duration(s.elapsed_s)}  remaining {s.remaining}  execs {s.execs} ({s.rate:.2f}/s)  "
             f"{s.where}  best risk {risk}  findings {len(s.findings)} ({hits} hits), incidents {s.incidents}"
-            f"{last}  workers busy {_busy(s)}  jobs {s.jobs}")
+            f"{last}  workers busy {_busy(s)}  jobs {s.jobs}  coverage {s.coverage}")
 
 
 def _busy(s: Status) -> str:
@@ -106,7 +133,7 @@ def screen(s: Status, title: str):
     figures.add_row("remaining", s.remaining, "best risk", risk)
     figures.add_row("now at", s.where, "workers busy", _busy(s))
     figures.add_row("jobs", s.jobs, "incidents", f"{s.incidents} (not the ego's fault)")
-    figures.add_row("last finding", s.last_finding or "-", "", "")
+    figures.add_row("last finding", s.last_finding or "-", "coverage", s.coverage)
     found = Table(title=f"findings by signature ({len(s.findings)})", title_justify="left", expand=True)
     found.add_column("#", justify="right", width=3)
     found.add_column("hits", justify="right", width=5)
