@@ -403,7 +403,11 @@ _WARMED = False
 def _warm_imports() -> None:
     try:
         import scipy.signal  # noqa: F401
-        import pyarrow.parquet  # noqa: F401
+        import pyarrow as pa
+        import pyarrow.parquet as pq
+
+        # the first write_table imports pandas (0.5-1.3 s on a shared 2-core machine); a finding's trace pays it
+        pq.write_table(pa.table({"x": [0.0]}), pa.BufferOutputStream())
     except Exception:  # noqa: BLE001 - the score and the trace import them again and report what is wrong
         pass
 
@@ -422,23 +426,31 @@ def _warm_up() -> None:
     threading.Thread(target=_warm_imports, name="drivefuzz-warm-up", daemon=True).start()
 
 
+#: what a seed job imports as it goes (drivefuzz.sim.execute and trace: to read the host's results)
+_JOB_MODULES = ("drivefuzz.ads", "drivefuzz.scenario.roadmap", "drivefuzz.search.catalogue", "drivefuzz.search.mutate",
+                "drivefuzz.search.quality", "drivefuzz.search.risk", "drivefuzz.search.schedule",
+                "drivefuzz.sim.execute", "drivefuzz.sim.trace", "drivefuzz.triage.attribute",
+                "drivefuzz.triage.coverage", "drivefuzz.triage.reproduce", "drivefuzz.triage.shrink",
+                "drivefuzz.triage.signature")
+
+
 def warm_worker() -> None:
     """Ready this process for seed jobs before it is given one (a local Dask worker's preload): the imports a
     job makes as it starts, and a simulation host, started. A cold worker did that inside the campaign's
     budget, where no core is free for it (on 2 cores, 2 jobs' first rounds waited 1-2 s each on scipy's
     import, a job on its own 0.2 s); here it is part of the cluster's start-up. Best effort: whatever fails
     here fails again, and is reported, where a job needs it."""
+    import importlib
+
     global _WARMED
     _WARMED = True
     _warm_imports()
+    for module in _JOB_MODULES:
+        try:
+            importlib.import_module(module)
+        except Exception:  # noqa: BLE001 - see above
+            pass
     try:
-        import drivefuzz.scenario.roadmap  # noqa: F401
-        import drivefuzz.search.mutate  # noqa: F401
-        import drivefuzz.search.quality  # noqa: F401
-        import drivefuzz.search.risk  # noqa: F401
-        import drivefuzz.search.schedule  # noqa: F401
-        import drivefuzz.triage.attribute  # noqa: F401
-        import drivefuzz.triage.signature  # noqa: F401
         from drivefuzz.sim.simhost import SimHost
 
         host = SimHost().start()
