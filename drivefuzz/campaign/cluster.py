@@ -112,8 +112,11 @@ def dask_client(where: str = "local", jobs: int = 2, batch: BatchSpec | None = N
     with dask.config.set(DASK_SETTINGS), contextlib.ExitStack() as stack:
         if where == "local":
             stack.enter_context(dask.config.set({"distributed.worker.preload": ["drivefuzz.campaign.cluster"]}))
+            # no dashboard; the scheduler's HTTP server (health, metrics) on a free port, not on 8787, which
+            # another cluster on a shared machine may hold (Dask then warns and takes another anyway)
             cluster = stack.enter_context(LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True,
-                                                       dashboard_address=None, silence_logs=40))
+                                                       dashboard_address=None, silence_logs=40,
+                                                       scheduler_kwargs={"dashboard_address": ":0"}))
             client = stack.enter_context(Client(cluster))
         elif where in BATCH_SYSTEMS:
             check_submit_command(where)
