@@ -13,10 +13,11 @@ Options (``--ads-option K=V``):
   reveals a bug that only a situation it builds can show: ``ignore_pedestrians`` (pedestrians are never
   obstacles), ``late_braking`` (obstacles count only within :data:`LATE_BRAKING_M` m), ``no_fog_slowdown``
   (no assured-clear-distance cap: it keeps its clear-weather speed in fog), and three that bite in other
-  encounters (issue 31, for ``tools/eval_attribution.py``): ``no_walker_prediction`` (a walker counts only where
-  it is, never where it walks to, and only once in the car's own corridor: it drives into walkers' paths), ``short_headway`` (it follows vehicles at a
-  :data:`SHORT_HEADWAY_S` s time gap and :data:`SHORT_HEADWAY_GAP` m at a standstill, blind to how fast it
-  closes in: a leader that brakes hard is struck), ``narrow_corridor`` (a vehicle counts only with its centre within :data:`NARROW_CORRIDOR_M` m plus
+  encounters (issue 31, for ``tools/eval_attribution.py``): ``no_walker_prediction`` (a walker counts only
+  where it is, never where it walks to, and only once in the car's own corridor: it drives into walkers'
+  paths), ``short_headway`` (it follows vehicles at a :data:`SHORT_HEADWAY_S` s time gap and
+  :data:`SHORT_HEADWAY_GAP` m at a standstill, blind to how fast it closes in: a leader that brakes hard is
+  struck), ``narrow_corridor`` (a vehicle counts only with its centre within :data:`NARROW_CORRIDOR_M` m plus
   half its width of the path: a car cutting or nosing in is seen late).
 - ``speed_margin``: fraction of the speed limit it aims for (default 0.95).
 - ``max_lat_accel``: comfort limit in curves [m/s^2].

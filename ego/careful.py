@@ -87,7 +87,7 @@ class CarefulADS(ReferenceADS):
         headway: float = 2.0  # [s] time gap it keeps to vehicles in its path
         min_gap: float = 4.0  # [m] standstill gap
         margin: float = 2.0  # [m] added to its stopping distance before it brakes fully
-        #: puddles it knows of, "x,y,length,width,rotation,friction" [m, rad ENU] separated by ";" (:func:`puddle_option`)
+        #: puddles it knows of: "x,y,length,width,rotation,friction" [m, rad ENU], ";" between (:func:`puddle_option`)
         puddles: str = ""
 
     def reset(self, mission, roadmap) -> None:

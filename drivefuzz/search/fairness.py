@@ -13,9 +13,9 @@ no driver could get out of. After every placement, position, timing or speed cha
   while the ego can still stop before it (careful braking ``EGO_DECEL`` after ``REACTION``);
 - **walkers do not walk into a stopped ego** (:func:`walks_into_stopped_ego`): a jaywalker (who ignores
   everyone) must not cross the ego's route where the ego is expected to stand while the walker is on the road
-  (waiting at a light, as the mutator's profile of the ego has it), nor just behind another jaywalker's line while that one is on the road
-  too (the ego that stops for the first, short of its line, stands on the second's: no driver avoids a walker
-  who walks into its side while it waits);
+  (waiting at a light, as the mutator's profile of the ego has it), nor just behind another jaywalker's line
+  while that one is on the road too (the ego that stops for the first, short of its line, stands on the
+  second's: no driver avoids a walker who walks into its side while it waits);
 - **cut-ins leave room**: a maneuver program's lane change or nudge is triggered by the gap or the headway to
   the ego (or by the clock, with SUMO's own safety gaps), and its gap leaves a careful driver room to react to
   the closing speed and brake (:func:`drivefuzz.scenario.model.cut_in_gap`; the executor holds back a lane
@@ -273,7 +273,9 @@ def walks_into_stopped_ego(mut: "Mutator", sc: Scenario, actor: Actor, d: float)
         if d2 is None or w2 is None or w2[1] < window[0] or window[1] < w2[0]:
             continue
         if 0.0 < d2 - d <= STOPPED_FOR_WALKER:
-            return f"crosses {d2 - d:.1f} m before {other.id} while it crosses too: it would walk into the ego waiting for it"
+            return (f"crosses {d2 - d:.1f} m before {other.id} while it crosses too: it would walk into the ego "
+                    f"waiting for it")
         if 0.0 < d - d2 <= STOPPED_FOR_WALKER:
-            return f"crosses {d - d2:.1f} m beyond {other.id} while it crosses too: {other.id} would walk into the ego waiting for it"
+            return (f"crosses {d - d2:.1f} m beyond {other.id} while it crosses too: {other.id} would walk into the "
+                    f"ego waiting for it")
     return None

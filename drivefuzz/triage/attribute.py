@@ -50,8 +50,9 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   :data:`AVOIDED` (``stationary_struck`` -> ``stopped_in_the_way``, ``pedestrian`` -> ``pedestrian_avoidable``,
   ...), and its reason says what the careful driver did instead (how close it came to the other party, where
   and how fast it was at the event's time). A replay that never came within :data:`MET_M` of the other party
-  says nothing either: it passed before or after the other came, which is timing, not care. Two excuses hold without a replay (their evidence says why,
-  under :data:`KEPT`), because the ego could not have been elsewhere in a way that matters:
+  says nothing either: it passed before or after the other came, which is timing, not care. Three excuses hold
+  without a replay (their evidence says why, under :data:`KEPT`), because the ego could not have been elsewhere
+  in a way that matters:
 
   - *stationary*, struck in its rear half by a vehicle that did not slow by more than 1 m/s in the
     :data:`APPROACH_WINDOW`: such a car strikes whatever stands or drives slower in that lane, wherever the
@@ -391,8 +392,8 @@ def careful_scenario(scenario):
     benchmark of what could have been done; the option's format is ``ego.careful.puddle_option``'s)."""
     options = {}
     if scenario.puddles:
-        options["puddles"] = ";".join(",".join(f"{v:.6g}" for v in (p.x, p.y, p.length, p.width, p.rotation, p.friction))
-                                      for p in scenario.puddles)
+        fields = ((p.x, p.y, p.length, p.width, p.rotation, p.friction) for p in scenario.puddles)
+        options["puddles"] = ";".join(",".join(f"{v:.6g}" for v in f) for f in fields)
     return scenario.model_copy(update={"ads": AdsSpec(name=CAREFUL_ADS, options=options)})
 
 
@@ -445,12 +446,13 @@ def test_excuse(scenario, trace, misbehavior, replay: Replay, verdict: Attributi
     evidence["counterfactual"].update(instead[1])
     if stuck and instead[1]["careful_distance_to_place"] <= REACHED_M and instead[1]["careful_speed_then"] <= 0.5:
         # no oracle fired on the replay, but it stood at the same place at the event's time: it was held the same
-        return Attribution(Fault.OTHER, f"{verdict.reason}; a careful driver stood there too at {misbehavior.time:.1f} s",
-                           evidence, verdict.rule)
+        return Attribution(Fault.OTHER, f"{verdict.reason}; a careful driver stood there too at "
+                                        f"{misbehavior.time:.1f} s", evidence, verdict.rule)
     closest = instead[1].get("careful_closest")
     if closest is not None and closest > MET_M:  # it never met the other party: timing, not care, spared it
         return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing (it never met "
-                                        f"{misbehavior.actors[0]}: {closest:.0f} m at the closest)", evidence, verdict.rule)
+                                        f"{misbehavior.actors[0]}: {closest:.0f} m at the closest)", evidence,
+                           verdict.rule)
     return Attribution(Fault.EGO, f"{verdict.reason}, but a careful driver avoided it: {instead[0]}", evidence,
                        AVOIDED[verdict.rule])
 
@@ -477,8 +479,8 @@ def _what_careful_did(ctrace, trace, mb) -> tuple[str, dict[str, Any]]:
                 float(d[j]) - 0.5 * EGO_LENGTH
             ev.update(careful_closest=round(float(d[j]), 2), careful_speed_closest=round(float(v[j]), 2))
             how = "stood" if v[j] <= STATIONARY_SPEED else f"drove at {float(v[j]):.1f} m/s"
-            return (f"it came no closer to {who} than {float(d[j]):.1f} m centre to centre (about {max(gap, 0.0):.1f} m "
-                    f"clear; it {how} then), and {where}", ev)
+            return (f"it came no closer to {who} than {float(d[j]):.1f} m centre to centre (about "
+                    f"{max(gap, 0.0):.1f} m clear; it {how} then), and {where}", ev)
     if mb.oracle in ("immobility", "mission"):
         return f"it got on ({where})", ev
     return where, ev
