@@ -78,11 +78,25 @@ def write_report(out: str | Path, html_path: str | Path | None = None, max_cards
         [f"{skipped} more card(s) left out (at most {max_cards})"] if skipped > 0 else [])
     from drivefuzz.storage import atomic_write_text
 
-    for path, text in ((html_path, render_html(info, findings, incidents, cards, risk, notes)),
-                       (md_path, render_markdown(info, findings, incidents, cards, notes))):
+    cov = _coverage(info.out)
+    for path, text in ((html_path, render_html(info, findings, incidents, cards, risk, notes, cov)),
+                       (md_path, render_markdown(info, findings, incidents, cards, notes, cov))):
         atomic_write_text(path, text)
         path.chmod(0o644)  # a report is for reading (the temporary file it replaced was private)
     return html_path, md_path
+
+
+def _coverage(out: Path) -> dict[str, Any] | None:
+    """The campaign's interaction coverage (also written to coverage.json); None where it cannot be read."""
+    from drivefuzz.errors import DriveFuzzError
+    from drivefuzz.triage.coverage import campaign_coverage
+
+    if not (out / "manifest.json").is_file():
+        return None
+    try:
+        return campaign_coverage(out)
+    except (DriveFuzzError, OSError, ValueError):
+        return None
 
 
 def campaign_facts(info: CampaignInfo) -> list[tuple[str, str]]:
@@ -571,18 +585,21 @@ def _minimal_html(r) -> str:
 
 
 def render_html(info: CampaignInfo, findings: list[FindingRow], incidents: list[FindingRow], cards: list[Card],
-                risk_png: bytes | None, notes: list[str]) -> str:
+                risk_png: bytes | None, notes: list[str], coverage: dict[str, Any] | None = None) -> str:
+    from drivefuzz.triage.coverage_map import CSS as COVERAGE_CSS, section_html
+
     facts = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in campaign_facts(info))
     by_folder = {c.row.folder: c for c in cards}
     parts = [
         "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
-        f"<title>drivefuzz report: {_e(info.out.name)}</title><style>{_CSS}</style></head><body>",
+        f"<title>drivefuzz report: {_e(info.out.name)}</title><style>{_CSS}{COVERAGE_CSS}</style></head><body>",
         f"<h1>drivefuzz report: {_e(info.out.name)}</h1>",
         f'<p class="sub">{len(findings)} finding(s) and {len(incidents)} incident(s), one per signature; '
         f"written {_e(time.strftime('%Y-%m-%d %H:%M'))}</p>",
         *(f'<p class="note">{_e(n)}</p>' for n in notes),
         f'<h2>The campaign</h2><dl class="facts">{facts}</dl>',
         "<h2>Risk over the campaign</h2>" + (_img(risk_png, "image/png", "risk per execution") or "<p>-</p>"),
+        section_html(coverage),
         *(["<h2>Likely bugs</h2>" + _groups_html(findings)] if len(findings) > 1 else []),
         "<h2>Findings (the ego's fault)</h2>" + (_table_html(findings) if findings else "<p>None.</p>"),
         *(_card_html(by_folder[r.folder]) for r in findings if r.folder in by_folder),
@@ -629,12 +646,15 @@ def _table_md(rows: list[FindingRow]) -> list[str]:
 
 
 def render_markdown(info: CampaignInfo, findings: list[FindingRow], incidents: list[FindingRow], card_list: list[Card],
-                    notes: list[str]) -> str:
+                    notes: list[str], coverage: dict[str, Any] | None = None) -> str:
+    from drivefuzz.triage.coverage_map import section_md
+
     cards = {c.row.folder: c for c in card_list}
     lines = [f"# drivefuzz report: {info.out.name}", "",
              f"{len(findings)} finding(s) and {len(incidents)} incident(s), one per signature. "
              "The pictures are in report.html.", "", *(f"> {n}" for n in notes), "", "## The campaign", ""]
     lines += [f"- **{k}**: {_md_cell(v)}" for k, v in campaign_facts(info)] + [""]
+    lines += section_md(coverage)
     if len(findings) > 1:
         lines += _groups_md(findings)
     for title, rows in (("Findings (the ego's fault)", findings), ("Incidents (not the ego's fault)", incidents)):
