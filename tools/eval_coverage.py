@@ -1,0 +1,142 @@
+"""Does coverage steer the search? The share of reachable interaction-coverage cells reached at equal budgets.
+
+Per network, campaigns fuzz the clean reference ADS from the committed seeds with the same strategy and the
+same number of executions, and differ only in how successors are chosen:
+
+- ``risk``: the default search (risk score, situation weight, the bonus for cells the job had not reached);
+- ``random``: a random mutant, the schedule ignoring the feedback (``--feedback random``).
+
+Each runs ``--reps`` times with campaign seeds 0..reps-1 (rep r uses seed r in both). Coverage is summed
+from the campaign's journals (:func:`drivefuzz.triage.coverage.campaign_coverage`) over the cells its
+network and seeds offer (:func:`drivefuzz.triage.coverage.reachable`). Reproduction reruns and shrinking are
+off: they do not change coverage, only the wall time.
+
+Printed: per network the reachable cells, per configuration the share reached in each repetition, its mean,
+and Mann-Whitney U's two-sided p of ``risk`` against ``random``; with ``--faults``, the executions to the
+first finding of each hidden fault of the reference ADS on town (``-``: not found). The last line::
+
+    coverage, default / random: X.XX (p = ...)
+
+Usage::
+
+    python tools/eval_coverage.py [--execs 1000] [--reps 5] [--networks town,...] [--jobs 2] [--faults]
+
+Prints only; a benchmark, not a test.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+from drivefuzz.campaign.compare import mann_whitney_p  # noqa: E402
+
+NETWORKS = ("highway", "interchange", "intersection", "roundabout", "town")
+#: Faults of the reference ADS that no committed seed shows (tools/eval_feedback.py and the later three).
+HIDDEN_FAULTS = ("ignore_pedestrians", "late_braking", "no_fog_slowdown", "no_walker_prediction", "short_headway",
+                 "narrow_corridor")
+
+
+def _seeds(network: str):
+    from drivefuzz.scenario.seed import list_seeds
+    from drivefuzz.scenario.sumofiles import read_scenario
+
+    return [read_scenario(p) for p in list_seeds(REPO / "seeds" / network)]
+
+
+def run_one(network: str, feedback: str, rep: int, opts: dict) -> dict:
+    """One campaign; its coverage and first finding (runs in a worker process)."""
+    import sqlite3
+
+    from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
+    from drivefuzz.scenario import AdsSpec
+    from drivefuzz.triage.coverage import campaign_coverage
+
+    ads = AdsSpec(name="ego", options={"fault": opts["fault"]} if opts.get("fault") else {})
+    cfg = FuzzConfig(population=opts["population"], strategy=opts["strategy"], seed=rep, max_execs=opts["execs"],
+                     feedback=feedback, ads=ads, reproduce=0, shrink=0)
+    with tempfile.TemporaryDirectory(prefix="eval-coverage-") as tmp:
+        t0 = time.perf_counter()
+        campaign = Campaign(Path(tmp) / "out", _seeds(network), cfg)
+        campaign.run()
+        wall = time.perf_counter() - t0
+        cov = campaign_coverage(Path(tmp) / "out", write=False)
+        db = sqlite3.connect(Path(tmp) / "out" / "index.sqlite")
+        first = db.execute("SELECT MIN(exec_id) FROM executions WHERE finding IS NOT NULL AND verdict NOT LIKE "
+                           "'simulator-crash%' AND verdict NOT LIKE 'hang%'").fetchone()[0]
+        db.close()
+    return {"network": network, "feedback": feedback, "rep": rep, "fault": opts.get("fault"),
+            "execs": campaign.progress.execs, "reachable": cov["reachable"], "reached": cov["reached"],
+            "share": cov["share"], "first": first, "wall": wall}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--execs", type=int, default=1000, help="executions per campaign [1000]")
+    ap.add_argument("--reps", type=int, default=5, help="repetitions per configuration and network [5]")
+    ap.add_argument("--networks", default=",".join(NETWORKS), help="committed seed sets [all five]")
+    ap.add_argument("--strategy", default="all", help="mutation strategy [all]")
+    ap.add_argument("--population", type=int, default=8, help="mutants per cycle [8]")
+    ap.add_argument("--configs", default="risk,random", help="feedbacks to compare [risk,random]")
+    ap.add_argument("--jobs", type=int, default=2, help="campaigns at once, in separate processes [2]")
+    ap.add_argument("--faults", action="store_true", help="also: executions to the first finding of hidden faults")
+    ap.add_argument("--fault-execs", type=int, default=1000, help="budget of a fault campaign [1000]")
+    args = ap.parse_args(argv)
+    if args.reps < 1 or args.execs < 1:
+        ap.error("--reps and --execs must be at least 1")
+    networks = [n.strip() for n in args.networks.split(",") if n.strip()]
+    configs = [c.strip() for c in args.configs.split(",") if c.strip()]
+    opts = {"execs": args.execs, "population": args.population, "strategy": args.strategy}
+    work = [(net, fb, rep, opts) for net in networks for rep in range(args.reps) for fb in configs]
+    if args.faults:
+        work += [("town", fb, rep, dict(opts, execs=args.fault_execs, fault=f))
+                 for f in HIDDEN_FAULTS for rep in range(args.reps) for fb in configs]
+    t0 = time.perf_counter()
+    with ProcessPoolExecutor(max(args.jobs, 1)) as pool:
+        results = list(pool.map(run_one, *zip(*work)))
+    wall = time.perf_counter() - t0
+
+    clean = [r for r in results if r["fault"] is None]
+    print(f"clean reference ADS, strategy {args.strategy}, {args.execs} executions per campaign "
+          f"(population {args.population}), {args.reps} repetitions; share of reachable cells reached")
+    print(f"{'network':<14}{'cells':>6}  {'config':<8}" + "".join(f"{'rep' + str(r):>7}" for r in range(args.reps))
+          + f"{'mean':>8}{'p':>9}")
+    pooled: dict[str, list[float]] = {c: [] for c in configs}
+    for net in networks:
+        shares = {}
+        for fb in configs:
+            rows = sorted((r for r in clean if r["network"] == net and r["feedback"] == fb), key=lambda r: r["rep"])
+            shares[fb] = [r["share"] for r in rows]
+            pooled[fb].extend(shares[fb])
+        for fb in configs:
+            p = "" if fb == "random" or "random" not in shares else f"{mann_whitney_p(shares[fb], shares['random']):9.4f}"
+            cells = next((r["reachable"] for r in clean if r["network"] == net), 0)
+            print(f"{net:<14}{cells:>6}  {fb:<8}" + "".join(f"{100 * s:>6.1f}%" for s in shares[fb])
+                  + f"{100 * statistics.mean(shares[fb]):>7.1f}%{p}")
+    if args.faults:
+        print(f"\nexecutions to the first finding of each hidden fault (town, {args.fault_execs} executions, "
+              f"{args.reps} repetitions; '-' = not found):")
+        print(f"{'fault':<22}" + "".join(f"{c:>30}" for c in configs))
+        for f in HIDDEN_FAULTS:
+            cells = []
+            for fb in configs:
+                rows = sorted((r for r in results if r["fault"] == f and r["feedback"] == fb), key=lambda r: r["rep"])
+                cells.append(",".join("-" if r["first"] is None else str(r["first"]) for r in rows))
+            print(f"{f:<22}" + "".join(f"{c:>30}" for c in cells))
+    print(f"\nwall clock: {wall:.0f} s for {sum(r['execs'] for r in results)} executions")
+    if "risk" in pooled and "random" in pooled and pooled["random"]:
+        ratio = statistics.mean(pooled["risk"]) / max(statistics.mean(pooled["random"]), 1e-9)
+        print(f"coverage, default / random: {ratio:.2f} (p = {mann_whitney_p(pooled['risk'], pooled['random']):.4f})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
