@@ -101,6 +101,26 @@ def test_the_reference_path_reaches_well_past_the_goal_and_the_planner_frame_cov
     assert not group.collide(car)
 
 
+def test_a_bend_tighter_than_the_car_can_turn_is_opened_and_the_straights_stay():
+    # a right-angle corner with a 2.5 m radius between two straights, 1 m apart
+    arc = [(2.5 * math.sin(a), 2.5 - 2.5 * math.cos(a)) for a in np.linspace(0.0, math.pi / 2, 5)[1:-1]]
+    pts = np.vstack([np.stack([np.arange(-30.0, 0.0), np.zeros(30)], axis=1), arc,
+                     np.stack([np.full(30, 2.5), np.arange(2.5, 32.5)], axis=1)])
+    pts = scene._resample(pts, 1.0)
+    k_max = 0.85 * math.tan(0.6) / 2.8
+    assert scene.curvature(pts).max() > 1.5 * k_max
+    out = scene.limit_curvature(pts, k_max)
+    assert scene.curvature(out).max() <= k_max
+    from scipy.spatial import cKDTree
+
+    off_road = cKDTree(scene._resample(pts, 0.05)).query(out)[0]
+    # an arc of the wider radius would cut the corner by (4.8 - 2.5) (sqrt 2 - 1) = 0.95 m; the local
+    # smoothing cuts more (1.7 m on this near-kink; 0.8-1.1 m on the seeds' junction lanes), within bounds
+    assert 0.5 < off_road.max() < 2.0
+    moved = np.hypot(*(out - pts).T)
+    assert moved[:15].max() == 0.0 and moved[-15:].max() == 0.0
+
+
 def test_the_road_boundary_is_computed_once_per_network(town):
     assert scene.boundary_segments(town) is scene.boundary_segments(town)
 

@@ -8,11 +8,12 @@ road users and a stop-line wall, and the desired speed; it returns a :class:`Pla
 
 Every ``replan_period`` seconds the base builds the planner's inputs (:mod:`adapters.commonroad.scene`)
 and asks for a plan; every step it tracks the newest plan: pure pursuit on the plan's rear-axle path
-(continued straight on past its end) for the steering, the plan's acceleration plus a proportional
-term on its speed for the pedals. A planner that returns None or raises is an ADS failure: the
-fail-safe brakes at ``failsafe_decel`` along the last plan's path, and the event is recorded. At
-the goal the car is held still. Every cycle's decisions (outcome, wall, desired speed) are kept and
-handed to the trace by :meth:`trace_info` (``meta.json``, key ``ads_info``).
+(continued along the reference path past its end) for the steering, the plan's acceleration plus a
+proportional term on its speed for the pedals. A planner that returns None or raises is an ADS
+failure: the fail-safe brakes at ``failsafe_decel`` along the last plan's path, and the event is
+recorded. Within :data:`GOAL_BRAKE` of the goal it brakes and then holds the car still. Every cycle's
+decisions (outcome, wall, desired speed) are kept and handed to the trace by :meth:`trace_info`
+(``meta.json``, key ``ads_info``).
 
 Units: SI, radians ENU. Deterministic: no clock, no randomness; the cycle falls on step counts.
 """
@@ -36,6 +37,10 @@ from adapters.commonroad import scene
 
 #: [m] the plan's path is continued this far along the reference path past its last point, for the path tracker.
 TRACK_TAIL = 30.0
+#: [m] from this far before the goal (or once past it) the adapter brakes to a stop there.
+GOAL_BRAKE = 1.0
+#: The reference path's bends are opened to this share of the car's tightest curvature.
+REF_CURVATURE_SHARE = 0.85
 #: [s] the desired speed's ramp to a stop point aims this many seconds (at the current speed) short of it
 STOP_LAG = 1.0
 #: [m/s^2] the desired speed's braking ramp before a bend (the reference ADS's).
@@ -90,8 +95,11 @@ class CommonRoadADS(ADS):
     def reset(self, mission: MissionInfo, roadmap) -> None:
         self.params = params = VehicleParams()
         self.mission = mission
+        # bends the car can turn, with a margin: the planner's samples curve about the reference too
+        k_car = math.tan(params.max_road_wheel_angle) / params.wheelbase
         self.ref_pts = scene.reference_path(roadmap, tuple(mission.route), mission.start_lane, mission.start_pos,
-                                            mission.goal_edge, mission.goal_pos)
+                                            mission.goal_edge, mission.goal_pos,
+                                            max_curvature=REF_CURVATURE_SHARE * k_car)
         self.ref = scene.as_path(self.ref_pts)
         _, self.s_goal, _ = self.ref.locate(*mission.goal_xy, hint=0, window=len(self.ref_pts))
         self.profile = _curve_profile(self.ref_pts, self.options.max_lat_accel)
@@ -143,10 +151,11 @@ class CommonRoadADS(ADS):
             self.limit = obs.speed_limit
         self.ref_idx, s_c, _ = self.ref.locate(ego.x, ego.y, self.ref_idx)
         to_goal = self.s_goal - s_c
-        if to_goal < 1.5 and ego.speed < 0.5:
-            self._done = True
-        if self._done:
-            return Control(0.0, 0.0, 1.0)
+        if to_goal < GOAL_BRAKE:
+            # the adapter stops the car at the goal: the planner, asked for 0 m/s, creeps on at ~0.6 m/s
+            self._done = self._done or ego.speed < 0.5
+            brake = 0.3 if self._done else self.options.failsafe_decel / self.params.max_brake_decel
+            return Control(0.0, 0.0, brake)
         if self.k % self.replan_every == 0:
             self._cycle(obs, s_c, to_goal)
         self.k += 1

@@ -8,10 +8,9 @@ This subclass only sets it up and calls it; everything else is :class:`adapters.
 Set-up, as measured (issue 32): ``debug.multiproc`` off (with it each plan starts six processes
 and is 2.5x slower); the planner's constructor insists on a CommonRoad scenario, so it gets an
 empty one and a planning problem at the start; the reference path goes in as a coordinate
-system (``set_reference_path(reference_path=...)`` fails with commonroad-clcs 2025.x), smoothed by the
-coordinate system's curve subdivision (the joins of SUMO's lane shapes have kinks: plain resampling left
-a curvature of 0.33 1/m at the town seed 000's left turn, above the car's 0.245, so every sample that
-followed the road there was infeasible; subdivision: 0.19 1/m, at most 0.8 m off the lanes); the car is
+system (``set_reference_path(reference_path=...)`` fails with commonroad-clcs 2025.x), resampled only
+(the base class has already opened its bends to what the car can turn; the frame's curve subdivision
+cut the interchange's tight left turns by 2.2 m, into the opposite lanes); the car is
 drivefuzz's (wheelbase, 0.6 rad road-wheel angle, 0.8 rad/s steering rate, 9 m/s^2 braking and
 the power limit as CommonRoad's switching speed), not the default BMW 320i, whose steering rate
 rejects every sample of a 90-degree town turn. ``set_desired_velocity`` ignores the requested speed
@@ -105,7 +104,7 @@ class ReactivePlannerADS(CommonRoadADS):
         logging.getLogger("RP_LOGGER").setLevel(logging.ERROR)
         cls = DomainAsNone if self.options.domain_shim else CoordinateSystem
         self.planner.set_reference_path(coordinate_system=cls(reference, clcs_params=CLCSParams(
-            processing_option=ProcessingOption.CURVE_SUBDIVISION)))
+            processing_option=ProcessingOption.RESAMPLE)))
 
     def plan(self, state: CarState, checker, desired_speed: float) -> Plan | None:
         planner = self.planner

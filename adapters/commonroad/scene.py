@@ -7,6 +7,9 @@ Everything here is a decision the adapter makes for the planner, kept simple and
   (:func:`ego.planning.build_path`), continued along the road (or straight on) for
   :data:`PAST_GOAL` metres past the goal, because the CommonRoad curvilinear frame raises
   ``CurvilinearProjectionDomainLongitudinalError`` for samples past its end;
+- :func:`limit_curvature`: the reference path's bends no tighter than the car can turn (SUMO's junction
+  lanes turn on radii down to 2.6 m, drivefuzz's car on 4.1 m; the planner samples around the
+  reference, and where it is tighter than the car every sample is kinematically infeasible);
 - :func:`boundary_segments`: the edge of the drivable area (every passenger lane, normal and
   internal, and every junction shape; sidewalks are outside) as short segments, computed once
   per network; :func:`boundary_group` keeps those near the route as thin boxes just outside the road;
@@ -118,11 +121,11 @@ def boundary_group(segments: np.ndarray, path_pts: np.ndarray, reach: float = BO
 
 
 def reference_path(rmap: RoadMap, route: tuple[str, ...], start_lane: str, start_pos: float, goal_edge: str,
-                   goal_pos: float, past_goal: float = PAST_GOAL) -> np.ndarray:
+                   goal_pos: float, past_goal: float = PAST_GOAL, max_curvature: float | None = None) -> np.ndarray:
     """(n, 2) the reference path [m], 1 m apart: the reference ADS's lane plan along the route, then on
     along the road past the goal (the straightest connection at each junction, straight on at a dead
     end) until it reaches ``past_goal`` metres beyond the goal; it starts :data:`BEFORE_START` metres
-    straight back behind the start."""
+    straight back behind the start; with ``max_curvature`` [1/m], smoothed by :func:`limit_curvature`."""
     route = lawful_route(rmap, tuple(route), start_lane)
     path, _ = build_path(rmap, route, start_lane, start_pos, goal_edge, goal_pos)
     pts = [path.pts]
@@ -161,7 +164,43 @@ def reference_path(rmap: RoadMap, route: tuple[str, ...], start_lane: str, start
         d = d / (np.hypot(*d) or 1.0)
         extra = past_goal - have + 1.0
         out = np.vstack([out, out[-1] + d * np.arange(1.0, extra + 1.0)[:, None]])
-    return _resample(out, 1.0)
+    out = _resample(out, 1.0)
+    return out if max_curvature is None else _resample(limit_curvature(out, max_curvature), 1.0)
+
+
+def curvature(pts: np.ndarray) -> np.ndarray:
+    """[1/m] per point, of the circle through the points two before and two after it (0 at the ends)."""
+    k = np.zeros(len(pts))
+    if len(pts) < 5:
+        return k
+    a, b, c = pts[:-4], pts[2:-2], pts[4:]
+    ab, bc, ca = np.hypot(*(b - a).T), np.hypot(*(c - b).T), np.hypot(*(a - c).T)
+    cross = (b - a)[:, 0] * (c - a)[:, 1] - (b - a)[:, 1] * (c - a)[:, 0]
+    k[2:-2] = 2.0 * np.abs(cross) / np.maximum(ab * bc * ca, 1e-9)
+    return k
+
+
+def limit_curvature(pts: np.ndarray, max_curvature: float, passes: int = 400) -> np.ndarray:
+    """``pts`` (1 m apart) with every bend opened to at most ``max_curvature`` [1/m]: local Laplacian
+    smoothing of the points within 4 m of a bend that is too tight, pass after pass, then two more
+    passes there (they even out the change of curvature). The road's other points stay where they were;
+    the bend moves inwards by what the wider radius needs (0.8 m at the town's and the intersection's
+    tightest turns, 1.1 m at the interchange's)."""
+    p = pts.copy()
+    near, extra = None, 0
+    for _ in range(passes):
+        bad = curvature(p) > max_curvature
+        if bad.any():
+            near = np.convolve(bad.astype(float), np.ones(9), mode="same") > 0
+            near[:3] = near[-3:] = False
+        elif near is None or extra == 2:
+            break
+        else:
+            extra += 1
+        q = p.copy()
+        q[1:-1] += 0.5 * ((p[:-2] + p[2:]) / 2.0 - p[1:-1])
+        p[near] = q[near]
+    return p
 
 
 def _straightest(lane):
