@@ -141,12 +141,16 @@ def party(trace, actor: str | None, f: int) -> str:
     k0 = max(f - int(round(APPROACH_S / trace.step_length)), 0)
     k = next((j for j in range(k0, f + 1) if track.present(j)), f)
     lx, ly = to_local(trace, k, float(track.x[k]), float(track.y[k]))
-    dh = abs(wrap_angle(float(track.heading[k]) - float(trace["heading"][k])))
-    moving = float(track.speed[k]) > 0.5
     side = "left" if ly > 0 else "right"
-    if track.kind == "pedestrian":
-        across = moving and math.pi / 4 < dh < 3 * math.pi / 4
-        return f"pedestrian/crossing_{side}" if across else "pedestrian/along"
+    if track.kind == "pedestrian":  # by its walk up to f (a walker's first frames may stand still)
+        j = next((i for i in range(f, k, -1) if track.present(i)), k)
+        dx, dy = float(track.x[j] - track.x[k]), float(track.y[j] - track.y[k])
+        if not math.isfinite(dx + dy) or math.hypot(dx, dy) < 0.5:
+            return "pedestrian/along"
+        dh = abs(wrap_angle(math.atan2(dy, dx) - float(trace["heading"][k])))
+        return f"pedestrian/crossing_{side}" if math.pi / 4 < dh < 3 * math.pi / 4 else "pedestrian/along"
+    dh = abs(wrap_angle(float(track.heading[k]) - float(trace["heading"][k])))
+    moving = float(np.nanmax(track.speed[k:f + 1])) > 0.5
     if moving and dh >= 3 * math.pi / 4:
         return "vehicle/oncoming"
     if moving and dh > math.pi / 4:

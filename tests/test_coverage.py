@@ -1,0 +1,242 @@
+"""Interaction coverage: close encounters built by hand on the town grid (real SUMO runs) and their cells; the
+cells each committed network offers; the schedule's novelty bonus; `drivefuzz coverage` on small real
+campaigns, a resumed campaign summing to the same coverage as one run straight through.
+
+Town facts used (tests/test_attribute.py): driving lanes ``_1`` (right) and ``_2`` (left), sidewalk ``_0``;
+B1 is signalised (from the west, A1B1, green for 0-35 s; from the south, B0B1, red for 0-45 s); B0 is a
+priority junction on the east-west street.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from drivefuzz.scenario import Actor, Mission, Scenario, SimOptions
+from drivefuzz.scenario.model import Weather
+from drivefuzz.scenario.roadmap import load_roadmap
+from drivefuzz.scenario.sumofiles import load_scenario
+from drivefuzz.search.schedule import Schedule, ScheduleConfig
+from drivefuzz.triage.coverage import (
+    CONDITIONS,
+    PROJECTIONS,
+    classify,
+    close_encounters,
+    execution_cells,
+    reachable,
+    split,
+    summarise,
+)
+
+ROOT = Path(__file__).resolve().parent.parent
+TOWN = str(ROOT / "networks" / "town.net.xml")
+
+
+@pytest.fixture(scope="module")
+def town_map():
+    return load_roadmap(TOWN)
+
+
+def _scenario(lane, pos, goal, goal_pos, *actors, weather=None, time_limit=30.0):
+    extra = {"weather": weather} if weather is not None else {}
+    return Scenario(network=TOWN, mission=Mission(start_lane=lane, start_pos=pos, goal_edge=goal, goal_pos=goal_pos),
+                    actors=actors, sim=SimOptions(time_limit=time_limit), seed=7, **extra)
+
+
+def _encounters(sc, rmap):
+    """{actor: Encounter} of a real run of ``sc`` by the reference ADS, and its cells."""
+    from drivefuzz.ads import load_ads
+    from drivefuzz.search.risk import risk_score
+    from drivefuzz.sim.execute import execute
+
+    trace = execute(sc, ads=load_ads("ego"), oracles=[]).trace
+    r = risk_score(trace)
+    found = {a: classify(sc, trace, rmap, a, f) for a, f in close_encounters(r)}
+    return found, execution_cells(sc, trace, rmap, r)
+
+
+# ------------------------------------------------------------------ classification of real runs
+def test_a_parked_car_ahead_in_fog_is_vehicle_ahead_while_braking_on_an_edge_in_fog(town_map):
+    parked = Actor(id="v1", kind="vehicle", nav="immobile", start_lane="A0B0_1", start_pos=45.0, speed=0.0)
+    enc, cells = _encounters(_scenario("A0B0_1", 10.0, "B0C0", 40.0, parked, weather=Weather(fog=60.0)), town_map)
+    e = enc["v1"]
+    assert (e.party, e.manoeuvre, e.element, e.speed, e.conditions) == (
+        "vehicle/ahead", "brake", "edge", "10-30 km/h", ("fog",))
+    assert {"party-manoeuvre:vehicle/ahead|brake", "party-element:vehicle/ahead|edge",
+            "speed-condition:10-30 km/h|fog"} <= set(cells)
+    assert cells == sorted(set(cells))
+    # the twin in clear weather: the same encounter, the condition is "clear"
+    enc, _ = _encounters(_scenario("A0B0_1", 10.0, "B0C0", 40.0, parked), town_map)
+    assert enc["v1"].conditions == ("clear",)
+
+
+def test_a_rear_ender_is_behind_and_a_faster_car_in_the_left_lane_is_rear_left(town_map):
+    rear = Actor(id="v1", kind="vehicle", nav="linear", start_lane="A0B0_1", start_pos=0.5, speed=13.0,
+                 dest_edge="B0C0")
+    enc, _ = _encounters(_scenario("A0B0_1", 10.0, "B0C0", 40.0, rear), town_map)
+    assert enc["v1"].party == "vehicle/behind" and enc["v1"].manoeuvre == "stop_go"
+    passer = Actor(id="v1", kind="vehicle", nav="linear", start_lane="A0B0_2", start_pos=2.0, speed=12.0,
+                   dest_edge="B0C0")
+    enc, _ = _encounters(_scenario("A0B0_1", 10.0, "B0C0", 40.0, passer), town_map)
+    assert enc["v1"].party == "vehicle/rear_left"
+
+
+def test_a_jaywalker_from_the_right_and_a_car_crossing_from_the_left_at_a_priority_junction(town_map):
+    jay = Actor(id="p1", kind="pedestrian", nav="linear", start_lane="A0B0_0", start_pos=60.0, speed=2.0, depart=8.0,
+                dest_xy=(68.4, 7.4))
+    enc, cells = _encounters(_scenario("A0B0_1", 10.0, "B0C0", 40.0, jay), town_map)
+    assert enc["p1"].party == "pedestrian/crossing_right" and enc["p1"].element == "edge"
+    assert "party-element:pedestrian/crossing_right|edge" in cells
+    crosser = Actor(id="v1", kind="vehicle", nav="linear", start_lane="B1B0_1", start_pos=20.0, speed=9.0, depart=2.0,
+                    dest_edge="B0A0")
+    enc, _ = _encounters(_scenario("A0B0_1", 10.0, "B0C0", 40.0, crosser), town_map)
+    assert (enc["v1"].party, enc["v1"].element) == ("vehicle/crossing_left", "priority")
+
+
+def test_the_light_at_arrival_green_from_the_west_red_from_the_south(town_map):
+    beyond = Actor(id="v1", kind="vehicle", nav="immobile", start_lane="B1C1_1", start_pos=12.0, speed=0.0)
+    enc, _ = _encounters(_scenario("A1B1_1", 20.0, "B1C1", 60.0, beyond, time_limit=40.0), town_map)
+    assert enc["v1"].element == "signal/green"
+    end = town_map.lane("B0B1_1").getLength()
+    queued = Actor(id="v1", kind="vehicle", nav="immobile", start_lane="B0B1_1", start_pos=end - 3.0, speed=0.0)
+    enc, _ = _encounters(_scenario("B0B1_1", 20.0, "B1B2", 60.0, queued, time_limit=40.0), town_map)
+    assert enc["v1"].element == "signal/red"
+
+
+def test_a_run_without_actors_has_no_cells_unless_the_tyres_near_their_limit(town_map):
+    from drivefuzz.search.risk import RiskScore
+
+    enc, cells = _encounters(_scenario("A0B0_1", 10.0, "B0C0", 40.0), town_map)
+    assert enc == {} and cells == []
+    assert close_encounters(RiskScore(score=0.0, grip=0.9, grip_frame=12)) == [(None, 12)]
+    assert close_encounters(RiskScore(score=0.0, grip=0.5, grip_frame=12)) == []
+    # the thresholds: TTC 3 s, PET 2 s, gap 1.5 m; per actor the most severe one's frame
+    r = RiskScore(score=0.0, encounters=(("a", "ttc", 2.9, 5), ("a", "gap", 0.3, 9), ("b", "ttc", 3.1, 4),
+                                         ("c", "pet", 1.9, 7)))
+    assert close_encounters(r) == [("a", 9), ("c", 7)]
+
+
+# ------------------------------------------------------------------ what each network offers
+@pytest.fixture(scope="module")
+def offered():
+    out = {}
+    for net in ("highway", "interchange", "intersection", "roundabout", "town"):
+        seeds = [load_scenario(p) for p in sorted((ROOT / "seeds" / net).iterdir()) if (p / "scenario.json").is_file()]
+        out[net] = set(reachable(load_roadmap(ROOT / "networks" / f"{net}.net.xml"), seeds))
+    return out
+
+
+def test_reachable_cells_follow_the_network_and_the_routes(offered):
+    def has(net, text):
+        return any(text in c for c in offered[net])
+
+    assert not has("highway", "roundabout") and has("roundabout", "|roundabout")
+    assert has("roundabout", "party-manoeuvre:vehicle/ahead|roundabout")
+    assert not has("highway", "pedestrian/") and not has("roundabout", "pedestrian/")
+    assert has("town", "pedestrian/crossing_left") and has("intersection", "pedestrian/along")
+    assert not has("highway", "signal/") and has("town", "signal/red") and has("interchange", "signal/amber")
+    assert has("highway", "|merge") and has("highway", "|ramp") and not has("town", "|ramp")
+    assert not has("roundabout", "lane_change") and has("highway", "lane_change")  # the ring has one lane
+    assert not has("highway", "vehicle/crossing") and has("town", "vehicle/crossing_right")
+    assert not has("highway", "turn_left") and has("town", "turn_left")
+    # speed bands up to the routes' limits: 50 km/h streets, 120 km/h motorway
+    assert not has("town", "60+ km/h") and has("highway", "60+ km/h")
+    for net, cells in offered.items():
+        assert {split(c)[0] for c in cells} == set(PROJECTIONS), net
+        assert {f"speed-condition:10-30 km/h|{c}" for c in CONDITIONS} <= cells, net
+
+
+def test_summarise_counts_reached_cells_findings_and_incidents():
+    reach = ["party-manoeuvre:vehicle/ahead|brake", "party-manoeuvre:vehicle/behind|cruise",
+             "speed-condition:0-10 km/h|clear"]
+    records = [{"cells": reach[:1] + ["party-element:none/grip|edge"], "finding": "findings/x"},
+               {"cells": reach[:1], "incident": "incidents/y"}, {"cells": []}]
+    cov = summarise(records, reach)
+    assert (cov["reachable"], cov["reached"], cov["share"]) == (3, 1, round(1 / 3, 4))
+    assert cov["cells"][reach[0]] == {"count": 2, "findings": 1, "incidents": 1}
+    assert cov["cells"][reach[1]]["count"] == 0
+    assert cov["projections"]["party-manoeuvre"] == {"reachable": 2, "reached": 1}
+    assert cov["outside"] == {"party-element:none/grip|edge": {"count": 1, "findings": 1, "incidents": 0}}
+
+
+# ------------------------------------------------------------------ steering
+def test_the_schedule_adds_a_bonus_for_cells_the_job_has_not_reached_only_under_risk_feedback():
+    cfg = ScheduleConfig()
+    s = Schedule(cfg, "risk")
+    assert s.cell_bonus(["a", "b"]) == pytest.approx(2 * cfg.cell_bonus)
+    assert s.cell_bonus([f"c{i}" for i in range(10)]) == pytest.approx(cfg.cell_bonus_max)
+    assert s.is_new(None, 0.0, ["a"]) and not s.is_new(None, 0.0, [])
+    s.observe([None], [], [["a"], None])
+    assert s.cells == {"a": 1} and s.cell_bonus(["a", "b"]) == pytest.approx(cfg.cell_bonus)
+    assert not s.is_new(None, 0.0, ["a"])
+    back = Schedule.from_json(cfg, json.loads(json.dumps(s.to_json())), "risk")
+    assert back.cells == {"a": 1}
+    for mode in ("random", "paper"):
+        other = Schedule(cfg, mode)
+        assert other.cell_bonus(["a"]) == 0.0 and not other.is_new(None, 1.0, ["a"])
+
+
+# ------------------------------------------------------------------ the command, a resume
+def _fuzz(*args):
+    from drivefuzz.cli import main
+
+    return CliRunner().invoke(main, ["fuzz", TOWN, "--population", "4", "--cycles", "2", "--time-limit", "25",
+                                     "--shrink", "0", *args])
+
+
+def _journal_cells(out: Path) -> dict[str, int]:
+    counts: dict[str, int] = {}
+    seen = set()
+    for path in sorted((out / "jobs").glob("*/journal.jsonl")):
+        for line in path.read_text().splitlines():
+            rec = json.loads(line)
+            if rec.get("event") == "end" and rec["key"] not in seen:
+                seen.add(rec["key"])
+                for c in rec.get("cells", ()):
+                    counts[c] = counts.get(c, 0) + 1
+    return counts
+
+
+def test_coverage_command_and_a_resume_sums_to_one_straight_run(tmp_path):
+    from drivefuzz.cli import main
+
+    a, b = tmp_path / "a", tmp_path / "b"
+    r = _fuzz("-o", str(a), "--max-execs", "6")
+    assert r.exit_code in (0, 1), r.output
+    assert "coverage " in r.stderr and (a / "coverage.json").is_file()
+    r = _fuzz("--resume", str(a), "--max-execs", "6")
+    assert r.exit_code in (0, 1), r.output
+    r = _fuzz("-o", str(b), "--max-execs", "12")
+    assert r.exit_code in (0, 1), r.output
+
+    run = CliRunner().invoke(main, ["coverage", str(a), "--json"])
+    assert run.exit_code == 0, run.output
+    cov = json.loads(run.output)
+    assert cov["executions"] == 12
+    counts = _journal_cells(a)
+    assert counts, "twelve town executions with actors met nobody"
+    assert {c: h["count"] for c, h in cov["cells"].items() if h["count"]} == \
+        {c: n for c, n in counts.items() if c in cov["cells"]}
+    assert cov["reached"] == sum(1 for c in cov["cells"] if c in counts)
+    assert json.loads((a / "coverage.json").read_text())["cells"] == cov["cells"]
+    # the resumed campaign (6 + 6) reached what one run of 12 reached, as often
+    straight = json.loads(CliRunner().invoke(main, ["coverage", str(b), "--json"]).output)
+    assert straight["cells"] == cov["cells"] and straight["executions"] == 12
+
+    text = CliRunner().invoke(main, ["coverage", str(a)])
+    assert text.exit_code == 0
+    assert text.output.startswith(f"coverage {cov['reached']}/{cov['reachable']} cells")
+    for name in ("party x manoeuvre", "party x element", "speed x condition", "never reached"):
+        assert name in text.output
+
+
+def test_coverage_of_a_folder_that_is_no_campaign_is_one_line_and_exit_2(tmp_path):
+    from drivefuzz.cli import main
+
+    r = CliRunner().invoke(main, ["coverage", str(tmp_path)])
+    assert r.exit_code == 2
+    assert "Traceback" not in r.output and len(r.output.strip().splitlines()) == 1, r.output
+    assert str(tmp_path) in r.output
