@@ -240,3 +240,26 @@ def test_coverage_of_a_folder_that_is_no_campaign_is_one_line_and_exit_2(tmp_pat
     assert r.exit_code == 2
     assert "Traceback" not in r.output and len(r.output.strip().splitlines()) == 1, r.output
     assert str(tmp_path) in r.output
+
+
+# ------------------------------------------------------------------ fairness: walkers cross, they do not walk along
+def test_a_walker_whose_line_runs_along_a_car_lane_is_not_placed(town_map):
+    """Issue 33, item 4: a targeted move of a jaywalker's start leaves its destination where it was, and its line
+    then runs along the road: it can only meet an ego stopped for it. Crossing square, or walking along the
+    sidewalk, stays allowed."""
+    from drivefuzz.search.fairness import unfair, walks_along_lane
+    from drivefuzz.search.mutate import MutationConfig, Mutator
+
+    mut = Mutator(town_map, MutationConfig())
+    sc = _scenario("A0B0_1", 10.0, "B0C0", 40.0)
+    across = Actor(id="p1", kind="pedestrian", nav="linear", start_lane="A0B0_0", start_pos=60.0, speed=2.0,
+                   dest_xy=(68.4, 7.4))
+    assert walks_along_lane(mut, across) is None and unfair(mut, sc, across) is None
+    x, y, _ = town_map.geom("A0B0_1").position(85.0)
+    along = across.model_copy(update={"dest_xy": (round(x, 2), round(y, 2))})
+    why = walks_along_lane(mut, along)
+    assert why is not None and "A0B0_1" in why
+    assert unfair(mut, sc, along) == why
+    sx, sy, _ = town_map.geom("A0B0_0").position(80.0)
+    on_sidewalk = across.model_copy(update={"dest_xy": (round(sx, 2), round(sy, 2))})
+    assert walks_along_lane(mut, on_sidewalk) is None

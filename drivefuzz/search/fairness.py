@@ -16,6 +16,10 @@ no driver could get out of. After every placement, position, timing or speed cha
   (waiting at a light, as the mutator's profile of the ego has it), nor just behind another jaywalker's line
   while that one is on the road too (the ego that stops for the first, short of its line, stands on the
   second's: no driver avoids a walker who walks into its side while it waits);
+- **walkers cross, they do not walk along** (:func:`walks_along_lane`): a jaywalker whose straight line runs
+  ``ALONG_LANE_M`` metres or more along a lane that cars use (at under 45 degrees to it; a targeted move of its
+  start leaves its destination where it was) can only ever meet an ego that has stopped for it, from behind
+  or in its side: it is not placed;
 - **cut-ins leave room**: a maneuver program's lane change or nudge is triggered by the gap or the headway to
   the ego (or by the clock, with SUMO's own safety gaps), and its gap leaves a careful driver room to react to
   the closing speed and brake (:func:`drivefuzz.scenario.model.cut_in_gap`; the executor holds back a lane
@@ -92,7 +96,10 @@ def unfair(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
     """Why ``actor`` in ``sc`` would leave a careful ego no way out, or None when it is fair."""
     d = route_distance(mut, sc, actor.start_lane, actor.start_pos)
     if actor.kind is ActorKind.PEDESTRIAN:
-        if actor.nav is NavType.LINEAR and d is not None:
+        if actor.nav is NavType.LINEAR:
+            why = walks_along_lane(mut, actor)
+            if why or d is None:
+                return why
             return _jaywalker(mut, sc, actor, d) or walks_into_stopped_ego(mut, sc, actor, d)
         if actor.nav is NavType.IMMOBILE and d is not None and 0.0 <= d < mut.cfg.immobile_min_range:
             return f"stands {d:.1f} m ahead of the ego's start"
@@ -278,4 +285,44 @@ def walks_into_stopped_ego(mut: "Mutator", sc: Scenario, actor: Actor, d: float)
         if 0.0 < d - d2 <= STOPPED_FOR_WALKER:
             return (f"crosses {d - d2:.1f} m beyond {other.id} while it crosses too: {other.id} would walk into the "
                     f"ego waiting for it")
+    return None
+
+
+#: [m] of a jaywalker's line that may run along one lane cars use (at under :data:`ALONG_ANGLE_DEG` to it)
+ALONG_LANE_M = 4.0
+ALONG_ANGLE_DEG = 45.0
+
+
+def walks_along_lane(mut: "Mutator", actor: Actor) -> str | None:
+    """Why the linear walker ``actor`` walks along a lane that cars use (None: it crosses, or stays off them).
+
+    Its line from its start to ``dest_xy`` is sampled every metre; a sample counts for the car lane it lies on
+    (within half the lane's width) when the line runs at under :data:`ALONG_ANGLE_DEG` to the lane there. Such
+    a walker meets the ego only after the ego has stopped behind it, or walks into the ego's side (the town
+    campaigns' walker-along-a-lane incidents)."""
+    if actor.kind is not ActorKind.PEDESTRIAN or actor.nav is not NavType.LINEAR or actor.dest_xy is None:
+        return None
+    rmap = mut.rmap
+    x0, y0, _ = rmap.geom(actor.start_lane).position(actor.start_pos)
+    dx, dy = actor.dest_xy[0] - x0, actor.dest_xy[1] - y0
+    length = math.hypot(dx, dy)
+    if length < ALONG_LANE_M:
+        return None
+    ux, uy = dx / length, dy / length
+    cos_max = math.cos(math.radians(ALONG_ANGLE_DEG))
+    along: dict[str, int] = {}
+    for s in np.arange(0.5, length, 1.0):
+        x, y = x0 + ux * s, y0 + uy * s
+        near = rmap.nearest_lane(x, y, radius=3.0, vclass=PASSENGER)
+        if near is None:
+            continue
+        g = rmap.geom(near[0])
+        if near[1] > g.width / 2:
+            continue
+        _, _, h = g.position(g.project(x, y)[0])
+        if abs(math.cos(h) * ux + math.sin(h) * uy) >= cos_max:
+            along[near[0]] = along.get(near[0], 0) + 1
+    lane, metres = max(along.items(), key=lambda kv: (kv[1], kv[0]), default=(None, 0))
+    if metres >= ALONG_LANE_M:
+        return f"walks {metres} m along {lane}, a lane cars use: it could only meet an ego stopped for it"
     return None
