@@ -332,6 +332,10 @@ def print_summary(rows: list[dict]) -> None:
             continue
         med = {k: statistics.median(e[k] for e in es) for k in es[0]}
         what = "median of " + str(len(es)) + " rounds" if len(es) > 1 else "1 round"
+        loads = sorted(r["load"][0] for r in rows if r["jobs"] in (1, n))
+        cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+        what += (f"; load average before the points {loads[0]:.2f} to {loads[-1]:.2f} on {cores} cores"
+                 + (": a busy machine, the figure is depressed" if loads[-1] > 0.5 * (cores or 1) else ""))
         print(f"RESULT jobs={n}: efficiency {med['runs']:.2f} in work done (runs), {med['sim_s']:.2f} in simulated "
               f"seconds, {med['execs']:.2f} in executions only; CPU {med['cpu']:.2f} ({what})")
 
