@@ -77,7 +77,8 @@ def test_journal_is_fsynced_before_each_checkpoint_not_per_record(tmp_path, town
     for c in checkpoints:  # the journal reached the disk just before every checkpoint
         assert c - 1 in journal
     # and the journal holds every record, in order
-    records = [json.loads(line) for line in (tmp_path / "out" / "jobs" / "000" / "journal.jsonl").read_text().splitlines()]
+    lines = (tmp_path / "out" / "jobs" / "000" / "journal.jsonl").read_text().splitlines()
+    records = [json.loads(line) for line in lines]
     assert [r["event"] for r in records][0] == "attempt" and sum(r["event"] == "start" for r in records) == len(ends)
 
 

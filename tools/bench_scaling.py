@@ -106,6 +106,14 @@ def process_cpu(worker_pids: dict[int, str]) -> dict[int, tuple[str, float]]:
     return out
 
 
+def machine_busy() -> float:
+    """CPU seconds the whole machine has been busy (all processes, the kernel's own work included)."""
+    import psutil
+
+    t = psutil.cpu_times()
+    return sum(t) - t.idle - getattr(t, "iowait", 0.0)
+
+
 def thread_cpu(runs_jobs: str = "main") -> dict[str, float]:
     """CPU seconds of this process's threads: the thread that runs the jobs (``main``, or ``dask`` for a Dask
     worker's task threads), and the rest (Dask's event loop and its helpers)."""
@@ -157,11 +165,11 @@ def run_point(jobs: int, seeds, budget: float, workdir: Path, rep: int = 0) -> d
     point: dict = {"jobs": jobs, "load": load, "rep": rep}
     t0 = time.monotonic()
     if jobs == 1:
-        cpu0 = process_cpu({})
+        cpu0, busy0 = process_cpu({}), machine_busy()
         t_run = time.monotonic()
         campaign.run()
         t_end = time.monotonic()
-        cpu1 = process_cpu({})
+        cpu1, busy1 = process_cpu({}), machine_busy()
         names = {os.getpid(): "campaign process"}
     else:
         from drivefuzz.campaign.cluster import dask_client
@@ -170,11 +178,11 @@ def run_point(jobs: int, seeds, budget: float, workdir: Path, rep: int = 0) -> d
             pids = client.run(os.getpid)
             names = {pid: f"worker {i + 1}" for i, pid in enumerate(sorted(pids.values()))}
             wt0 = client.run(_worker_threads)
-            cpu0 = process_cpu(names)
+            cpu0, busy0 = process_cpu(names), machine_busy()
             t_run = time.monotonic()
             campaign.run(client=client)
             t_end = time.monotonic()
-            cpu1 = process_cpu(names)
+            cpu1, busy1 = process_cpu(names), machine_busy()
             wt1 = client.run(_worker_threads)
             point["worker_threads"] = {names[pids[a]]: {k: v - wt0.get(a, {}).get(k, 0.0) for k, v in wt1[a].items()}
                                        for a in wt1 if a in pids}
@@ -184,6 +192,8 @@ def run_point(jobs: int, seeds, budget: float, workdir: Path, rep: int = 0) -> d
     point["tail"] = t_end - stops[0] if stops else None
     threads1 = thread_cpu()
     point["cpu"] = {pid: (role, cpu - cpu0.get(pid, (role, 0.0))[1]) for pid, (role, cpu) in cpu1.items()}
+    # what the rest of the machine ran meanwhile: [cores], on average over the point
+    point["others"] = max(busy1 - busy0 - sum(cpu for _, cpu in point["cpu"].values()), 0.0) / point["wall"]
     point["threads"] = {k: threads1[k] - threads0.get(k, 0.0) for k in threads1}
     point["poll"] = (poll.seconds, poll.calls)
     point["names"] = names
@@ -231,6 +241,7 @@ def print_point(p: dict) -> None:
           f"(+{p['runs'] - p['execs']} triage reruns), {p['sim_s']:.0f} s simulated, in {p['wall']:.1f} s "
           f"(+ {p['startup']:.1f} s cluster start-up before it); {p['findings']} findings, {p['incidents']} incidents; "
           f"load average before: {p['load'][0]:.2f} {p['load'][1]:.2f} {p['load'][2]:.2f}")
+    print(f"    the rest of the machine (other users, the kernel) kept {p['others']:.2f} cores busy meanwhile")
     if p["indexed"] != p["execs"]:
         print(f"    (the index holds {p['indexed']} executions, the journals {p['execs']})")
     if p["runs"]:
@@ -309,22 +320,25 @@ def efficiencies(p: dict, base: dict) -> dict[str, float]:
 
 
 def print_summary(rows: list[dict]) -> None:
-    print(f"\n{'round':>5} {'jobs':>4} {'load':>5} {'execs':>6} {'runs':>6} {'sim s':>7} {'wall s':>7} {'runs/h':>8}"
-          f"   efficiency: {'work (runs)':>11} {'sim s':>6} {'execs only':>10}   {'CPU':>5}")
+    print(f"\n{'round':>5} {'jobs':>4} {'load':>5} {'others':>6} {'execs':>6} {'runs':>6} {'sim s':>7} {'wall s':>7} "
+          f"{'runs/h':>8}   efficiency: {'work (runs)':>11} {'sim s':>6} {'execs only':>10}   {'CPU':>5}")
     effs: dict[int, list[dict[str, float]]] = {}
     for r in rows:
         base = next((b for b in rows if b["jobs"] == 1 and b["rep"] == r["rep"]), None)
         eff = efficiencies(r, base) if base else dict.fromkeys(("runs", "sim_s", "execs", "cpu"), float("nan"))
         effs.setdefault(r["jobs"], []).append(eff)
-        print(f"{r['rep'] + 1:>5} {r['jobs']:>4} {r['load'][0]:>5.2f} {r['execs']:>6} {r['runs']:>6} {r['sim_s']:>7.0f} "
-              f"{r['wall']:>7.1f} {3600 * r['runs'] / r['wall']:>8.0f}   {'':>11} {eff['runs']:>11.2f} "
+        print(f"{r['rep'] + 1:>5} {r['jobs']:>4} {r['load'][0]:>5.2f} {r['others']:>6.2f} {r['execs']:>6} "
+              f"{r['runs']:>6} {r['sim_s']:>7.0f} {r['wall']:>7.1f} {3600 * r['runs'] / r['wall']:>8.0f}   {'':>11} "
+              f"{eff['runs']:>11.2f} "
               f"{eff['sim_s']:>6.2f} {eff['execs']:>10.2f}   {eff['cpu']:>5.2f}")
     print("\nefficiency = the work rate at N jobs / (N x the rate at 1 job in the same round), over each campaign's "
           "run (cluster start-up apart). Work (the headline) = runs: executions plus triage reruns (the careful "
           "driver's replays, reproduction reruns, shrinking); 'sim s' weighs each run by the seconds it simulated; "
           "'execs only' counts executions alone. CPU = runs per CPU second of all the campaign's processes "
           "relative to 1 job: the campaign layer's CPU cost, which other users' load does not change. "
-          "load = the 1-minute load average before the point: others' work on the machine depresses N > 1 first.")
+          "load = the 1-minute load average before the point (it still holds the previous point's own load); "
+          "others = the cores that the rest of the machine (other users, the kernel) kept busy during the point, "
+          "on average: others' work depresses N > 1 first.")
     import statistics
 
     for n, es in sorted(effs.items()):
@@ -332,10 +346,10 @@ def print_summary(rows: list[dict]) -> None:
             continue
         med = {k: statistics.median(e[k] for e in es) for k in es[0]}
         what = "median of " + str(len(es)) + " rounds" if len(es) > 1 else "1 round"
-        loads = sorted(r["load"][0] for r in rows if r["jobs"] in (1, n))
+        others = sorted(r["others"] for r in rows if r["jobs"] in (1, n))
         cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-        what += (f"; load average before the points {loads[0]:.2f} to {loads[-1]:.2f} on {cores} cores"
-                 + (": a busy machine, the figure is depressed" if loads[-1] > 0.5 * (cores or 1) else ""))
+        what += (f"; others kept {others[0]:.2f} to {others[-1]:.2f} of the {cores} cores busy during the points"
+                 + (": a busy machine, the figure is depressed" if others[-1] > 0.1 * (cores or 1) else ""))
         print(f"RESULT jobs={n}: efficiency {med['runs']:.2f} in work done (runs), {med['sim_s']:.2f} in simulated "
               f"seconds, {med['execs']:.2f} in executions only; CPU {med['cpu']:.2f} ({what})")
 
