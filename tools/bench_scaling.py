@@ -1,6 +1,6 @@
 """Campaign throughput against the number of parallel jobs, and where each process spent its time.
 
-    python tools/bench_scaling.py [--jobs 1,2] [--budget 60] [--repeat 1] [--network networks/town.net.xml]
+    python tools/bench_scaling.py [--jobs 1,2] [--budget 60] [--repeat 1] [--wait-quiet S] [--network NET]
     python tools/bench_scaling.py --jobs 1,4,8,16      # on a machine with 16 cores or more
 
 For each job count N it runs the same campaign (the network's committed seeds,
@@ -112,6 +112,18 @@ def machine_busy() -> float:
 
     t = psutil.cpu_times()
     return sum(t) - t.idle - getattr(t, "iowait", 0.0)
+
+
+def wait_until_quiet(limit_s: float, cores: float = 0.2, window_s: float = 3.0) -> float:
+    """Wait (at most ``limit_s``) until the machine runs less than ``cores`` of other work over ``window_s``;
+    return the last reading [cores busy]."""
+    t_end = time.monotonic() + limit_s
+    while True:
+        b0, t0 = machine_busy(), time.monotonic()
+        time.sleep(window_s)
+        busy = (machine_busy() - b0) / (time.monotonic() - t0)
+        if busy < cores or time.monotonic() >= t_end:
+            return busy
 
 
 def thread_cpu(runs_jobs: str = "main") -> dict[str, float]:
@@ -360,6 +372,8 @@ def main() -> None:
     ap.add_argument("--budget", type=float, default=60.0, help="wall seconds per point [60]")
     ap.add_argument("--repeat", type=int, default=1,
                     help="rounds of all the job counts, interleaved (1,2,1,2,...): the median is printed [1]")
+    ap.add_argument("--wait-quiet", type=float, default=0.0, metavar="S",
+                    help="before each point, wait up to S seconds for the machine to be quiet (others < 0.2 cores)")
     ap.add_argument("--network", default=str(ROOT / "networks" / "town.net.xml"))
     args = ap.parse_args()
     counts = [int(x) for x in args.jobs.split(",")]
@@ -383,6 +397,9 @@ def main() -> None:
     try:
         for rep in range(args.repeat):
             for n in counts:
+                if args.wait_quiet > 0:
+                    busy = wait_until_quiet(args.wait_quiet)
+                    print(f"\n(waited for a quiet machine: {busy:.2f} cores busy just before the point)")
                 r = run_point(n, seeds, args.budget, workdir, rep)
                 rows.append(r)
                 print_point(r)
