@@ -414,9 +414,9 @@ def _warm_imports() -> None:
 
 def _warm_up() -> None:
     """Import scipy.signal (the driving-quality score's filters: 0.4 s, once per process) and pyarrow's Parquet
-    writer (a finding's trace: 0.07 s) on a thread of its own while the first executions run in the
-    simulation host: this process only waits on the host then, so the imports cost a short campaign no wall
-    time instead of delaying the first score and the first finding."""
+    writer, with the pandas that its first write imports (a finding's trace), on a thread of its own while the
+    first executions run in the simulation host: this process only waits on the host then, so the imports cost
+    a short campaign no wall time instead of delaying the first score and the first finding."""
     global _WARMED
     if _WARMED:
         return
