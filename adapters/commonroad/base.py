@@ -12,7 +12,7 @@ and asks for a plan; every step it tracks the newest plan: pure pursuit on the p
 proportional term on its speed for the pedals. A planner that returns None or raises is an ADS
 failure: the fail-safe brakes at ``failsafe_decel`` along the last plan's path, and the event is
 recorded. Within :data:`GOAL_BRAKE` of the goal it brakes and then holds the car still. Every cycle's
-decisions (outcome, wall, desired speed) are kept and handed to the trace by :meth:`trace_info`
+decisions (outcome, wall, desired speed, the plan's top speed) are kept and handed to the trace by :meth:`trace_info`
 (``meta.json``, key ``ads_info``).
 
 Units: SI, radians ENU. Deterministic: no clock, no randomness; the cycle falls on step counts.
@@ -116,7 +116,7 @@ class CommonRoadADS(ADS):
         self.plan_path = None
         self.failsafe = False
         self._done = False
-        self.log: dict[str, list] = {"t": [], "outcome": [], "error": [], "wall": [], "v_des": []}
+        self.log: dict[str, list] = {"t": [], "outcome": [], "error": [], "wall": [], "v_des": [], "v_plan_max": []}
         self.setup_error = ""
         try:  # a planner that cannot be set up is the ADS failing: every cycle is then recorded as raised
             self.make_planner(self.ref_pts, params)
@@ -192,6 +192,7 @@ class CommonRoadADS(ADS):
         log["error"].append(error)
         log["wall"].append(wall is not None)
         log["v_des"].append(round(v_des, 4))
+        log["v_plan_max"].append(round(float(np.max(result.v)), 4) if result is not None else None)
         self.failsafe = result is None
         if result is not None:
             self.plan_, self.plan_t0 = result, obs.t

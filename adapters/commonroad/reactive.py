@@ -32,6 +32,7 @@ import logging
 import warnings
 
 import numpy as np
+from pydantic import Field
 
 with warnings.catch_warnings():  # commonroad-io's generated protobuf code and the route planner warn on import
     warnings.simplefilter("ignore", DeprecationWarning)
@@ -91,10 +92,14 @@ class ReactivePlannerADS(CommonRoadADS):
 
     class Options(CommonRoadADS.Options):
         domain_shim: bool = True  # samples out of the projection domain are infeasible, not an exception
+        # [m/s] the planner's own switch to its low-velocity sampling (4.0, as shipped); see bug 3 in
+        # docs/bugs/commonroad-reactive-planner.md: below it, in a bend, no sample was feasible
+        low_vel_threshold: float = Field(4.0, ge=0.0)
 
     def make_planner(self, reference: np.ndarray, params: VehicleParams) -> None:
         dt = self.options.planner_dt
         config = planner_config(params, dt, self.steps)
+        config.planning.low_vel_mode_threshold = self.options.low_vel_threshold
         x, y = reference[0]
         start = InitialState(time_step=0, position=np.array([x, y]), orientation=0.0, velocity=0.0,
                              acceleration=0.0, yaw_rate=0.0, slip_angle=0.0)
