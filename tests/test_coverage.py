@@ -10,6 +10,7 @@ priority junction on the east-west street.
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -206,7 +207,9 @@ def test_coverage_command_and_a_resume_sums_to_one_straight_run(tmp_path):
     a, b = tmp_path / "a", tmp_path / "b"
     r = _fuzz("-o", str(a), "--max-execs", "6")
     assert r.exit_code in (0, 1), r.output
-    assert "coverage " in r.stderr and (a / "coverage.json").is_file()
+    assert (a / "coverage.json").is_file()
+    assert re.search(r"jobs \S+ done  coverage \d+/\d+ cells \(\d+ %\)", r.stderr), r.stderr  # the status line
+    assert re.search(r"^coverage \d+/\d+ cells \(\d+ %\); drivefuzz coverage", r.stderr, re.M), r.stderr
     r = _fuzz("--resume", str(a), "--max-execs", "6")
     assert r.exit_code in (0, 1), r.output
     r = _fuzz("-o", str(b), "--max-execs", "12")

@@ -119,7 +119,10 @@ def execution_cells(scenario, trace, rmap, risk) -> list[str]:
         return []
     cells: set[str] = set()
     for actor, f in close_encounters(risk):
-        cells.update(classify(scenario, trace, rmap, actor, f).cells())
+        try:
+            cells.update(classify(scenario, trace, rmap, actor, f).cells())
+        except (KeyError, ValueError, IndexError):  # a lane or link the map does not have: not classified, and
+            continue  # the execution's record is still written (coverage must never cost a campaign its journal)
     return sorted(cells)
 
 
@@ -218,7 +221,9 @@ def _phase(trace, f: int) -> str:
 
 
 def speed_band(v: float) -> str:
-    return next(name for top, name in SPEED_BANDS if v < top)
+    """The band of speed ``v`` [m/s] (the lowest for a speed the trace does not have)."""
+    return next((name for top, name in SPEED_BANDS if v < top), SPEED_BANDS[0][1]) if math.isfinite(v) \
+        else SPEED_BANDS[0][1]
 
 
 def conditions(scenario, trace, f: int) -> tuple[str, ...]:
