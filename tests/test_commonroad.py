@@ -81,8 +81,9 @@ def test_the_reference_path_reaches_well_past_the_goal_and_the_planner_frame_cov
     sc = load_scenario(ROOT / "seeds" / seed)
     m = sc.mission
     rmap = load_roadmap(sc.network_path())
+    edges: list[str] = []
     pts = scene.reference_path(rmap, rmap.route(m.start_edge, m.goal_edge), m.start_lane, m.start_pos,
-                               m.goal_edge, m.goal_pos)
+                               m.goal_edge, m.goal_pos, edges_out=edges)
     path = scene.as_path(pts)
     gx, gy, _ = rmap.geom(rmap.drive_lane(m.goal_edge)).position(m.goal_pos)
     _, s_goal, lat = path.locate(gx, gy, hint=0, window=len(pts))
@@ -95,7 +96,7 @@ def test_the_reference_path_reaches_well_past_the_goal_and_the_planner_frame_cov
     assert co.convert_to_cartesian_coords(s_cl + 60.0, 0.0) is not None
     # and the car at its start lies on the road, clear of the boundary
     x, y, h = rmap.geom(m.start_lane).position(m.start_pos)
-    group, n = scene.boundary_group(scene.boundary_segments(rmap), pts)
+    group, n = scene.boundary_group(scene.boundary_segments(rmap, edges), pts)
     assert n > 0
     car = scene.pycrcc.RectOBB(2.3, 0.95, h, x - 2.3 * math.cos(h), y - 2.3 * math.sin(h))
     assert not group.collide(car)
@@ -121,8 +122,14 @@ def test_a_bend_tighter_than_the_car_can_turn_is_opened_and_the_straights_stay()
     assert moved[:15].max() == 0.0 and moved[-15:].max() == 0.0
 
 
-def test_the_road_boundary_is_computed_once_per_network(town):
-    assert scene.boundary_segments(town) is scene.boundary_segments(town)
+def test_the_road_boundary_keeps_the_other_direction_out_and_its_pieces_are_computed_once(town):
+    from shapely import Point
+
+    assert scene._parts(town) is scene._parts(town)
+    area = scene.road_area(town, ["A0B0"])
+    a, b = town.geom(town.drive_lane("A0B0")), town.geom(town.drive_lane("B0A0"))
+    assert area.contains(Point(*a.position(a.length / 2)[:2]))
+    assert not area.contains(Point(*b.position(b.length / 2)[:2]))
 
 
 # -- the fail-safe ----------------------------------------------------------------------------------------------
@@ -186,8 +193,8 @@ def test_a_short_seed_drives_clean_and_the_same_in_another_process(tmp_path):
 
     env = dict(os.environ)
     out = tmp_path / "trace"
-    proc = subprocess.run([sys.executable, "-m", "drivefuzz.cli", "run", str(SHORT_SEED), "--ads", "commonroad-reactive",
-                           "--trace", str(out)], capture_output=True, text=True, env=env, timeout=240)
+    cmd = [sys.executable, "-m", "drivefuzz.cli", "run", str(SHORT_SEED), "--ads", "commonroad-reactive", "--trace", str(out)]
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=240)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "goal_reached" in proc.stdout
     from drivefuzz.sim.trace import Trace

@@ -97,13 +97,14 @@ class CommonRoadADS(ADS):
         self.mission = mission
         # bends the car can turn, with a margin: the planner's samples curve about the reference too
         k_car = math.tan(params.max_road_wheel_angle) / params.wheelbase
+        edges: list[str] = []
         self.ref_pts = scene.reference_path(roadmap, tuple(mission.route), mission.start_lane, mission.start_pos,
                                             mission.goal_edge, mission.goal_pos,
-                                            max_curvature=REF_CURVATURE_SHARE * k_car)
+                                            max_curvature=REF_CURVATURE_SHARE * k_car, edges_out=edges)
         self.ref = scene.as_path(self.ref_pts)
         _, self.s_goal, _ = self.ref.locate(*mission.goal_xy, hint=0, window=len(self.ref_pts))
         self.profile = _curve_profile(self.ref_pts, self.options.max_lat_accel)
-        self.boundary, self.n_boundary = scene.boundary_group(scene.boundary_segments(roadmap), self.ref_pts)
+        self.boundary, self.n_boundary = scene.boundary_group(scene.boundary_segments(roadmap, edges), self.ref_pts)
         opts = self.options
         self.steps = max(int(round(opts.horizon / opts.planner_dt)), 1)
         self.replan_every = max(int(round(opts.replan_period / mission.step_length)), 1)

@@ -10,9 +10,10 @@ Everything here is a decision the adapter makes for the planner, kept simple and
 - :func:`limit_curvature`: the reference path's bends no tighter than the car can turn (SUMO's junction
   lanes turn on radii down to 2.6 m, drivefuzz's car on 4.1 m; the planner samples around the
   reference, and where it is tighter than the car every sample is kinematically infeasible);
-- :func:`boundary_segments`: the edge of the drivable area (every passenger lane, normal and
-  internal, and every junction shape; sidewalks are outside) as short segments, computed once
-  per network; :func:`boundary_group` keeps those near the route as thin boxes just outside the road;
+- :func:`boundary_segments`: the edge of the drivable area as short segments: the passenger lanes
+  of the edges the reference path runs along and the junctions at their ends (shape and internal
+  lanes); sidewalks and, outside junctions, the other direction's lanes are off the road (the
+  pieces are computed once per network); :func:`boundary_group` makes them thin boxes just outside;
 - :func:`predictions`: every other road user as a box moving at constant velocity along its
   heading over the planning horizon (a time-variant collision object);
 - :func:`stop_wall`: a virtual wall across the road at a red (or, when there is room to stop
@@ -54,48 +55,66 @@ STOP_WALL_HALF_DEPTH = 0.5
 #: (the reference ADS's rule).
 YELLOW_DECEL = 4.0
 
-_SEGMENTS: "weakref.WeakKeyDictionary[RoadMap, np.ndarray]" = weakref.WeakKeyDictionary()
+_PARTS: "weakref.WeakKeyDictionary[RoadMap, tuple[dict, dict]]" = weakref.WeakKeyDictionary()
 
 
-def road_area(rmap: RoadMap):
-    """The drivable area (shapely): every lane that allows passenger cars, buffered to its width, and
-    every junction shape; closed by 0.1 m so that the seams between neighbouring lanes vanish."""
-    parts = []
-    for edge in rmap.net.getEdges(withInternal=True):
-        if edge.getFunction() not in ("", "internal"):
-            continue
-        for lane in edge.getLanes():
-            if not lane.allows(PASSENGER):
+def _parts(rmap: RoadMap) -> tuple[dict, dict]:
+    """Per normal edge, its passenger lanes buffered to their width; per junction, its shape and its internal
+    passenger lanes (shapely); computed once per road map (a campaign runs thousands of missions on one)."""
+    parts = _PARTS.get(rmap)
+    if parts is None:
+        edges: dict[str, list] = {}
+        nodes: dict[str, list] = {}
+        for edge in rmap.net.getEdges(withInternal=True):
+            fn = edge.getFunction()
+            if fn not in ("", "internal"):
                 continue
-            shape = [p[:2] for p in lane.getShape()]
-            if len(shape) >= 2 and LineString(shape).length > 0.01:
-                parts.append(LineString(shape).buffer(lane.getWidth() / 2.0, cap_style="flat"))
-    for node in rmap.net.getNodes():
-        shape = [p[:2] for p in node.getShape()]
-        if len(shape) >= 3:
-            poly = Polygon(shape).buffer(0)
-            if not poly.is_empty:
-                parts.append(poly)
-    return unary_union(parts).buffer(0.1, join_style="mitre").buffer(-0.1, join_style="mitre")
+            key = edge.getToNode().getID() if fn == "internal" else edge.getID()
+            into = nodes if fn == "internal" else edges
+            for lane in edge.getLanes():
+                shape = [p[:2] for p in lane.getShape()]
+                if lane.allows(PASSENGER) and len(shape) >= 2 and LineString(shape).length > 0.01:
+                    into.setdefault(key, []).append(LineString(shape).buffer(lane.getWidth() / 2.0, cap_style="flat"))
+        for node in rmap.net.getNodes():
+            shape = [p[:2] for p in node.getShape()]
+            if len(shape) >= 3:
+                poly = Polygon(shape).buffer(0)
+                if not poly.is_empty:
+                    nodes.setdefault(node.getID(), []).append(poly)
+        parts = _PARTS[rmap] = (edges, nodes)
+    return parts
 
 
-def boundary_segments(rmap: RoadMap) -> np.ndarray:
-    """(n, 4) the drivable area's edge as segments ``x0, y0, x1, y1`` [m] with the road on their left;
-    computed once per road map (a campaign runs thousands of missions on one network)."""
-    seg = _SEGMENTS.get(rmap)
-    if seg is None:
-        area = road_area(rmap)
-        polys = list(area.geoms) if hasattr(area, "geoms") else [area]
-        rows = []
-        for poly in polys:
-            poly = orient(poly, 1.0)  # exterior counter-clockwise, holes clockwise: the road is on the left
-            for ring in (poly.exterior, *poly.interiors):
-                pts = np.asarray(ring.coords)
-                rows.append(np.hstack([pts[:-1], pts[1:]]))
-        seg = np.vstack(rows) if rows else np.zeros((0, 4))
-        seg = seg[np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) > 1e-3]
-        _SEGMENTS[rmap] = seg
-    return seg
+def road_area(rmap: RoadMap, edges: "list[str] | None" = None):
+    """The drivable area (shapely): the passenger lanes of ``edges`` (all normal edges when None) and the
+    junctions at their ends (shape and internal lanes), closed by 0.1 m so that the seams between
+    neighbouring lanes vanish. The lanes of the other direction are outside, but for junctions."""
+    by_edge, by_node = _parts(rmap)
+    if edges is None:
+        edges = list(by_edge)
+    polys = []
+    nodes = set()
+    for e in dict.fromkeys(edges):
+        polys += by_edge.get(e, [])
+        edge = rmap.edge(e)
+        nodes.update((edge.getFromNode().getID(), edge.getToNode().getID()))
+    for n in sorted(nodes):
+        polys += by_node.get(n, [])
+    return unary_union(polys).buffer(0.1, join_style="mitre").buffer(-0.1, join_style="mitre")
+
+
+def boundary_segments(rmap: RoadMap, edges: "list[str] | None" = None) -> np.ndarray:
+    """(n, 4) the edge of :func:`road_area` as segments ``x0, y0, x1, y1`` [m] with the road on their left."""
+    area = road_area(rmap, edges)
+    polys = list(area.geoms) if hasattr(area, "geoms") else [area]
+    rows = []
+    for poly in polys:
+        poly = orient(poly, 1.0)  # exterior counter-clockwise, holes clockwise: the road is on the left
+        for ring in (poly.exterior, *poly.interiors):
+            pts = np.asarray(ring.coords)
+            rows.append(np.hstack([pts[:-1], pts[1:]]))
+    seg = np.vstack(rows) if rows else np.zeros((0, 4))
+    return seg[np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) > 1e-3]
 
 
 def boundary_group(segments: np.ndarray, path_pts: np.ndarray, reach: float = BOUNDARY_REACH):
@@ -121,12 +140,15 @@ def boundary_group(segments: np.ndarray, path_pts: np.ndarray, reach: float = BO
 
 
 def reference_path(rmap: RoadMap, route: tuple[str, ...], start_lane: str, start_pos: float, goal_edge: str,
-                   goal_pos: float, past_goal: float = PAST_GOAL, max_curvature: float | None = None) -> np.ndarray:
+                   goal_pos: float, past_goal: float = PAST_GOAL, max_curvature: float | None = None,
+                   edges_out: "list[str] | None" = None) -> np.ndarray:
     """(n, 2) the reference path [m], 1 m apart: the reference ADS's lane plan along the route, then on
     along the road past the goal (the straightest connection at each junction, straight on at a dead
     end) until it reaches ``past_goal`` metres beyond the goal; it starts :data:`BEFORE_START` metres
-    straight back behind the start; with ``max_curvature`` [1/m], smoothed by :func:`limit_curvature`."""
+    straight back behind the start; with ``max_curvature`` [1/m], smoothed by :func:`limit_curvature`.
+    ``edges_out`` receives the normal edges it runs along."""
     route = lawful_route(rmap, tuple(route), start_lane)
+    edges = list(route)
     path, _ = build_path(rmap, route, start_lane, start_pos, goal_edge, goal_pos)
     pts = [path.pts]
     goal_lane = rmap.drive_lane(goal_edge)
@@ -148,6 +170,7 @@ def reference_path(rmap: RoadMap, route: tuple[str, ...], start_lane: str, start
             break
         via, lane = nxt
         seen.add(lane.getID())
+        edges.append(lane.getEdge().getID())
         for v in ([] if not via else rmap.internal_chain(via)):
             vp = np.asarray(rmap.lane(v).getShape(), dtype=float)[:, :2]
             pts.append(vp)
@@ -165,6 +188,8 @@ def reference_path(rmap: RoadMap, route: tuple[str, ...], start_lane: str, start
         extra = past_goal - have + 1.0
         out = np.vstack([out, out[-1] + d * np.arange(1.0, extra + 1.0)[:, None]])
     out = _resample(out, 1.0)
+    if edges_out is not None:
+        edges_out.extend(edges)
     return out if max_curvature is None else _resample(limit_curvature(out, max_curvature), 1.0)
 
 
