@@ -14,7 +14,9 @@ sorts each folder:
 
 and prints per fault, and over all faults:
 
-- **recall**: of the differential folders, the share filed as findings (fault ``ego`` or ``unclear``);
+- **recall**: of the differential folders, the share filed as findings (fault ``ego`` or ``unclear``); beside it
+  the recall the order before issue 31 would have had (the findings whose verdict overturned a rule's excuse
+  were incidents then);
 - **precision**: of the findings, the share that are differential; and **precision (confirmed)**: the share
   that are differential or confirmed by the verdict itself, which a shared finding may be, since the clean
   reference ADS has bugs of its own (it does not yield when it turns left): a rule saw the ego's own fault
@@ -165,9 +167,13 @@ def judge_campaign(out: Path, fault: str) -> dict[str, Any]:
             mb = verdict["misbehaviors"][0]
             cf = (att.get("evidence") or {}).get("counterfactual") or {}
             confirmed = att.get("rule") in DECIDED or (att.get("fault") == "ego" and cf and not cf.get("same_failure"))
+            # an excuse of a rule that the careful driver's replay overturned: the order before issue 31 filed it
+            # as an incident
+            overturned = att.get("fault") == "ego" and bool(cf.get("excuse"))
             rows.append({"folder": f"{sub}/{vpath.parent.name}", "finding": sub == "findings", "hits": n_hits,
                          "fault": att.get("fault"), "rule": att.get("rule"), "reason": att.get("reason"),
                          "event": f"{mb['oracle']}/{mb['kind']}", "confirmed": bool(confirmed),
+                         "overturned": overturned,
                          "clean": clean_outcome(vpath.parent, verdict)})
     execs = 0
     db = out / "index.sqlite"
@@ -186,6 +192,7 @@ def _counts(rows: list[dict[str, Any]]) -> dict[str, Any]:
         "folders": len(rows), "findings": len(findings), "incidents": len(rows) - len(findings),
         "differential": len(diff), "caught": len(caught),
         "recall": len(caught) / len(diff) if diff else None,
+        "recall_old": sum(not r["overturned"] for r in caught) / len(diff) if diff else None,
         "precision": len(true_findings) / len(findings) if findings else None,
         "precision_confirmed": (sum(r["clean"] == "differential" or r["confirmed"] for r in findings) / len(findings)
                                 if findings else None),
@@ -204,8 +211,8 @@ def print_fault(row: dict[str, Any]) -> None:
     wall = f", {row['wall_s']:.0f} s" if "wall_s" in row else ""
     print(f"\n== {row['fault']}: {row['execs']} executions{wall}; {c['findings']} findings, {c['incidents']} incidents "
           f"(folders); clean ADS: {c['differential']} avoided, {c['shared']} shared, {c['first']} failed first")
-    print(f"   recall {_pct(c['recall'])} ({c['caught']}/{c['differential']} folders, "
-          f"{c['caught_hits']}/{c['differential_hits']} hits)   precision {_pct(c['precision'])} "
+    print(f"   recall {_pct(c['recall'])} (old order {_pct(c['recall_old'])}; {c['caught']}/{c['differential']} "
+          f"folders, {c['caught_hits']}/{c['differential_hits']} hits)   precision {_pct(c['precision'])} "
           f"(confirmed {_pct(c['precision_confirmed'])})")
     for r in row["folders"]:
         if r["clean"] == "differential" and not r["finding"]:
@@ -217,16 +224,19 @@ def print_fault(row: dict[str, Any]) -> None:
 
 
 def summarise(rows: list[dict[str, Any]]) -> None:
-    print("\nfault                    execs findings incidents differential caught recall precision confirmed")
+    print("\nfault                    execs findings incidents differential caught recall (old order) precision "
+          "confirmed")
     every = []
     for row in rows:
         c = _counts(row["folders"])
         every += row["folders"]
         print(f"{row['fault']:<24} {row['execs']:>5} {c['findings']:>8} {c['incidents']:>9} {c['differential']:>12} "
-              f"{c['caught']:>6} {_pct(c['recall']):>6} {_pct(c['precision']):>9} {_pct(c['precision_confirmed']):>9}")
+              f"{c['caught']:>6} {_pct(c['recall']):>6} {_pct(c['recall_old']):>11} {_pct(c['precision']):>9} "
+              f"{_pct(c['precision_confirmed']):>9}")
     c = _counts(every)
     print(f"{'all':<24} {sum(r['execs'] for r in rows):>5} {c['findings']:>8} {c['incidents']:>9} "
-          f"{c['differential']:>12} {c['caught']:>6} {_pct(c['recall']):>6} {_pct(c['precision']):>9} "
+          f"{c['differential']:>12} {c['caught']:>6} {_pct(c['recall']):>6} {_pct(c['recall_old']):>11} "
+          f"{_pct(c['precision']):>9} "
           f"{_pct(c['precision_confirmed']):>9}")
 
 
