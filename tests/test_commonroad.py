@@ -193,7 +193,8 @@ def test_a_short_seed_drives_clean_and_the_same_in_another_process(tmp_path):
 
     env = dict(os.environ)
     out = tmp_path / "trace"
-    cmd = [sys.executable, "-m", "drivefuzz.cli", "run", str(SHORT_SEED), "--ads", "commonroad-reactive", "--trace", str(out)]
+    cmd = [sys.executable, "-m", "drivefuzz.cli", "run", str(SHORT_SEED), "--ads", "commonroad-reactive",
+           "--trace", str(out)]
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=240)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     assert "goal_reached" in proc.stdout

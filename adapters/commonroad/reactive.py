@@ -95,11 +95,18 @@ class ReactivePlannerADS(CommonRoadADS):
         # [m/s] the planner's own switch to its low-velocity sampling (4.0, as shipped); see bug 3 in
         # docs/bugs/commonroad-reactive-planner.md: below it, in a bend, no sample was feasible
         low_vel_threshold: float = Field(4.0, ge=0.0)
+        # the planner's continuous collision check (off, as shipped): off, it checks only the poses at its time
+        # steps, and a pedestrian crossing between two of them is not seen (bug 4)
+        continuous_check: bool = False
+        # reset() converts the car's state into the curvilinear frame in the previous cycle's velocity mode
+        # (plan() switches the mode only afterwards): true sets the mode first (bug 3); false: as shipped
+        mode_fix: bool = False
 
     def make_planner(self, reference: np.ndarray, params: VehicleParams) -> None:
         dt = self.options.planner_dt
         config = planner_config(params, dt, self.steps)
         config.planning.low_vel_mode_threshold = self.options.low_vel_threshold
+        config.planning.continuous_collision_check = self.options.continuous_check
         x, y = reference[0]
         start = InitialState(time_step=0, position=np.array([x, y]), orientation=0.0, velocity=0.0,
                              acceleration=0.0, yaw_rate=0.0, slip_angle=0.0)
@@ -116,6 +123,8 @@ class ReactivePlannerADS(CommonRoadADS):
         x0 = ReactivePlannerState(time_step=0, position=np.array([state.x, state.y]), orientation=state.heading,
                                   velocity=state.speed, acceleration=state.accel, yaw_rate=state.yaw_rate,
                                   steering_angle=state.steer)
+        if self.options.mode_fix:
+            planner._low_vel_mode = state.speed < planner.config.planning.low_vel_mode_threshold
         planner.reset(initial_state_cart=x0, collision_checker=checker)
         planner.set_desired_velocity(desired_speed, current_speed=max(state.speed, AT_REST))
         result = planner.plan()
