@@ -105,7 +105,8 @@ def test_reckless_crossers_are_incidents_when_they_run_the_red_and_findings_when
     reproduction = {got.fault: json.loads((tmp_path / got.rel / "verdict.json").read_text())["reproduction"]
                     for got in (incident, finding)}
     assert reproduction["other"] is None and reproduction["ego"]["runs"] == 1
-    assert incident.executions == 0
+    # its one execution is the careful driver's replay that tested the excuse (issue 31), which failed too
+    assert incident.executions == 1 and "could not avoid it either" in filed["other"][0][1]
 
 
 def test_report_all_measures_the_reproduction_of_incidents_too():
