@@ -74,7 +74,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.report:
         outs = [(p.name, p) for d in args.report for p in ([d] if (d / "manifest.json").exists() else
                                                            sorted(x for x in d.iterdir() if x.is_dir()))]
-        summarise([judge_campaign(out, fault) for fault, out in outs])
+        rows = [judge_campaign(out, fault) for fault, out in outs]
+        for row in rows:
+            print_fault(row)
+        summarise(rows)
         return 0
     faults = [f.strip() for f in args.faults.split(",") if f.strip()]
     tmp = None
