@@ -20,7 +20,8 @@ and prints per fault, and over all faults:
 - **precision**: of the findings, the share that are differential; and **precision (confirmed)**: the share
   that are differential or confirmed by the verdict itself, which a shared finding may be, since the clean
   reference ADS has bugs of its own (it does not yield when it turns left): a rule saw the ego's own fault
-  (:data:`DECIDED`), or the careful driver's replay avoided it. Shared findings are listed to read;
+  (:data:`DECIDED`), it ran a red light or sped (the ego's by the trace alone), or the careful driver's replay
+  avoided it. Shared findings are listed to read;
 - the differential incidents (misses), each with its rule and reason, and the shared findings, for reading.
 
 Counts are per folder (one per signature), with the hits (executions filed there) beside them.
@@ -169,7 +170,10 @@ def judge_campaign(out: Path, fault: str) -> dict[str, Any]:
             att = verdict.get("attribution") or {}
             mb = verdict["misbehaviors"][0]
             cf = (att.get("evidence") or {}).get("counterfactual") or {}
-            confirmed = att.get("rule") in DECIDED or (att.get("fault") == "ego" and cf and not cf.get("same_failure"))
+            # a red light run or speeding binds whatever the others do: the ego's by the trace alone
+            lawful = att.get("rule") == "own_driving" and mb["oracle"] in ("red_light", "speeding")
+            confirmed = att.get("rule") in DECIDED or lawful or (att.get("fault") == "ego" and cf
+                                                                 and not cf.get("same_failure"))
             # an excuse of a rule that the careful driver's replay overturned: the order before issue 31 filed it
             # as an incident
             overturned = att.get("fault") == "ego" and bool(cf.get("excuse"))
