@@ -16,7 +16,11 @@ Work done is counted three ways, from the campaign's journals:
     runs    executions plus triage reruns (the careful driver's replays, the reproduction
             reruns, the shrinking runs): the headline, "work done"
     sim s   the seconds those runs simulated (seeds differ in how long they simulate)
+    host    the CPU seconds the simulation hosts spent on those runs (what they cost)
     execs   executions only (what the search counts; a triage rerun is not one)
+
+Runs differ in cost, and N jobs reach other seeds and more new signatures than 1 job in
+the same time, so at short budgets the runs, sim s and host figures bracket the work done.
 
 Efficiency = the work rate at N jobs / (N x the work rate at 1 job), the rate over
 the campaign's own run (``Campaign.run``); starting the local Dask cluster is a
@@ -42,6 +46,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import shutil
 import sqlite3
@@ -322,35 +327,40 @@ def print_cpu(p: dict) -> None:
 
 
 def efficiencies(p: dict, base: dict) -> dict[str, float]:
-    """Work rate at ``p``'s job count over that many times the one-job rate of ``base``, by each measure of work;
-    ``cpu``: work per CPU second of all the campaign's processes, over the one-job figure."""
+    """Work rate at ``p``'s job count over that many times the one-job rate of ``base``, by each measure of work
+    (``host``: the simulation hosts' CPU seconds); ``cpu``: runs per CPU second of all the campaign's processes,
+    over the one-job figure."""
     n = p["jobs"]
-    eff = {k: (p[k] / p["wall"]) / (n * base[k] / base["wall"]) if base[k] else float("nan")
-           for k in ("runs", "sim_s", "execs")}
+    work = {"runs": p["runs"], "sim_s": p["sim_s"], "execs": p["execs"], "host": _host_cpu(p)}
+    one = {"runs": base["runs"], "sim_s": base["sim_s"], "execs": base["execs"], "host": _host_cpu(base)}
+    eff = {k: (work[k] / p["wall"]) / (n * one[k] / base["wall"]) if one[k] else float("nan") for k in work}
     eff["cpu"] = (p["runs"] / _all_cpu(p)) / (base["runs"] / _all_cpu(base)) if base["runs"] else float("nan")
     return eff
 
 
 def print_summary(rows: list[dict]) -> None:
     print(f"\n{'round':>5} {'jobs':>4} {'load':>5} {'others':>6} {'execs':>6} {'runs':>6} {'sim s':>7} {'wall s':>7} "
-          f"{'runs/h':>8}   efficiency: {'work (runs)':>11} {'sim s':>6} {'execs only':>10}   {'CPU':>5}")
+          f"{'runs/h':>8}   efficiency: {'work (runs)':>11} {'sim s':>6} {'host CPU':>8} {'execs only':>10}   "
+          f"{'CPU':>5}")
     effs: dict[int, list[dict[str, float]]] = {}
     for r in rows:
         base = next((b for b in rows if b["jobs"] == 1 and b["rep"] == r["rep"]), None)
-        eff = efficiencies(r, base) if base else dict.fromkeys(("runs", "sim_s", "execs", "cpu"), float("nan"))
+        eff = efficiencies(r, base) if base else dict.fromkeys(("runs", "sim_s", "host", "execs", "cpu"), math.nan)
         effs.setdefault(r["jobs"], []).append(eff)
         print(f"{r['rep'] + 1:>5} {r['jobs']:>4} {r['load'][0]:>5.2f} {r['others']:>6.2f} {r['execs']:>6} "
               f"{r['runs']:>6} {r['sim_s']:>7.0f} {r['wall']:>7.1f} {3600 * r['runs'] / r['wall']:>8.0f}   {'':>11} "
-              f"{eff['runs']:>11.2f} "
-              f"{eff['sim_s']:>6.2f} {eff['execs']:>10.2f}   {eff['cpu']:>5.2f}")
+              f"{eff['runs']:>11.2f} {eff['sim_s']:>6.2f} {eff['host']:>8.2f} {eff['execs']:>10.2f}   "
+              f"{eff['cpu']:>5.2f}")
     print("\nefficiency = the work rate at N jobs / (N x the rate at 1 job in the same round), over each campaign's "
           "run (cluster start-up apart). Work (the headline) = runs: executions plus triage reruns (the careful "
-          "driver's replays, reproduction reruns, shrinking); 'sim s' weighs each run by the seconds it simulated; "
-          "'execs only' counts executions alone. CPU = runs per CPU second of all the campaign's processes "
-          "relative to 1 job: the campaign layer's CPU cost, which other users' load does not change. "
-          "load = the 1-minute load average before the point (it still holds the previous point's own load); "
-          "others = the cores that the rest of the machine (other users, the kernel) kept busy during the point, "
-          "on average: others' work depresses N > 1 first.")
+          "driver's replays, reproduction reruns, shrinking); 'sim s' weighs each run by the seconds it simulated, "
+          "'host CPU' by the CPU its simulation host spent on it (runs differ in cost, and N jobs reach other seeds "
+          "and more new signatures than 1 in the same time: the three bracket the work done); 'execs only' counts "
+          "executions alone. CPU = runs per CPU second of all the campaign's processes relative to 1 job: the "
+          "campaign layer's CPU cost, which other users' load does not change. load = the 1-minute load average "
+          "before the point (it still holds the previous point's own load); others = the cores that the rest of "
+          "the machine (other users, the kernel) kept busy during the point, on average: others' work depresses "
+          "N > 1 first.")
     import statistics
 
     for n, es in sorted(effs.items()):
@@ -363,7 +373,8 @@ def print_summary(rows: list[dict]) -> None:
         what += (f"; others kept {others[0]:.2f} to {others[-1]:.2f} of the {cores} cores busy during the points"
                  + (": a busy machine, the figure is depressed" if others[-1] > 0.1 * (cores or 1) else ""))
         print(f"RESULT jobs={n}: efficiency {med['runs']:.2f} in work done (runs), {med['sim_s']:.2f} in simulated "
-              f"seconds, {med['execs']:.2f} in executions only; CPU {med['cpu']:.2f} ({what})")
+              f"seconds, {med['host']:.2f} in simulation-host CPU, {med['execs']:.2f} in executions only; "
+              f"CPU {med['cpu']:.2f} ({what})")
 
 
 def main() -> None:
