@@ -164,4 +164,3 @@ def test_a_walker_does_not_cross_just_behind_another_walkers_line(town, town_sce
     assert walks_into_stopped_ego(mut, scene, walker("p3", 30.0, 0.0), d(walker("p3", 30.0, 0.0))) is None
     late = walker("p4", 64.0, 30.0)  # on the road long after p1 has crossed
     assert walks_into_stopped_ego(mut, scene, late, d(late)) is None
-
