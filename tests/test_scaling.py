@@ -126,3 +126,34 @@ def test_local_workers_are_warm_and_quiet_before_their_first_job():
         (seen,) = client.run(state).values()
     assert seen == {"spare": [True], "scipy": True, **DASK_SETTINGS}
     assert dask.config.get("distributed.worker.profile.enabled") is True  # set for the cluster only
+
+
+def test_status_coverage_reads_only_new_records_and_agrees_with_a_full_read(tmp_path):
+    """The status screen's coverage figure is kept up incrementally; it must equal the union over all records."""
+    import random
+    from types import SimpleNamespace
+
+    from drivefuzz.campaign import status
+    from drivefuzz.triage.coverage import JournalCells
+
+    rng = random.Random(5)
+    cells = [f"cell-{i}" for i in range(60)]
+    offered = set(cells[::2])
+    campaign = SimpleNamespace(out=tmp_path, seeds=[])
+    status._COVERAGE[id(campaign)] = (campaign, JournalCells(tmp_path), offered, set())
+    try:
+        for _ in range(25):
+            for si in range(3):
+                path = tmp_path / "jobs" / f"{si:03d}" / "journal.jsonl"
+                path.parent.mkdir(parents=True, exist_ok=True)
+                with open(path, "a") as fh:
+                    for _ in range(rng.randint(0, 3)):  # keys repeat: a re-run job journals an execution twice
+                        fh.write(json.dumps({"event": "end", "key": f"{si}/{rng.randint(0, 30)}",
+                                             "cells": rng.sample(cells, 2)}) + "\n")
+            full = JournalCells(tmp_path)
+            full.update()
+            want = len(full.reached() & offered)
+            assert status._coverage([campaign]) == f"{want}/{len(offered)} cells ({100.0 * want / len(offered):.0f} %)"
+        assert 0 < want < len(offered)
+    finally:
+        status._COVERAGE.pop(id(campaign), None)

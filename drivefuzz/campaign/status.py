@@ -11,6 +11,7 @@ one plain line every :data:`PLAIN_EVERY_S` seconds, so that a log stays readable
 
 from __future__ import annotations
 
+import itertools
 import sys
 import time
 from dataclasses import dataclass
@@ -67,7 +68,8 @@ def read_status(campaigns: Sequence[Any], workers: int | None) -> Status:
         coverage=_coverage(campaigns))
 
 
-_COVERAGE: dict[int, tuple[Any, Any, int]] = {}  # id(campaign) -> (campaign, its JournalCells, reachable cells)
+#: id(campaign) -> (campaign, its JournalCells, the cells its seeds offer, the cells its executions reached)
+_COVERAGE: dict[int, tuple[Any, Any, set[str], set[str]]] = {}
 
 
 def _coverage(campaigns: Sequence[Any]) -> str:
@@ -82,10 +84,14 @@ def _coverage(campaigns: Sequence[Any]) -> str:
                 from drivefuzz.triage.coverage import JournalCells, reachable
 
                 cells = set(reachable(load_roadmap(c.seeds[0].network_path()), c.seeds)) if c.seeds else set()
-                entry = _COVERAGE[id(c)] = (c, JournalCells(c.out), cells)
-            _, journals, cells = entry
-            journals.update()
-            reached += len(journals.reached() & cells)
+                entry = _COVERAGE[id(c)] = (c, JournalCells(c.out), cells, set())
+            _, journals, cells, seen = entry
+            new = journals.update()
+            # only the new records' cells: the union of them all at every redraw took 15 ms at 40 000
+            # executions (6 % of a core at 4 redraws a second, growing with the campaign)
+            seen.update(cell for rec in itertools.islice(reversed(journals.records.values()), new)
+                        for cell in rec["cells"])
+            reached += len(seen & cells)
             total += len(cells)
         except Exception:  # noqa: BLE001 - the screen shows what it can; `drivefuzz coverage` reports errors
             continue
