@@ -92,6 +92,12 @@ def test_rear_ended_while_stopped_is_other():
     assert v.fault is Fault.OTHER
     assert "stationary" in v.reason
     assert v.evidence["contact_side"] == "rear" and v.evidence["ego_speed"] < 0.1
+    # struck from behind by a car that never braked: the excuse holds without the careful driver's replay
+    assert v.evidence["kept_without_replay"].startswith("v2 struck from behind without braking")
+    calls = []
+    v2 = attribute(sc, execute(sc, oracles=oracles()).trace, m, load_roadmap(NET),
+                   replay=lambda s: calls.append(s) or ((), None))
+    assert not calls and v2.fault is Fault.OTHER
 
 
 def test_rear_ended_while_driving_lawfully_is_other():
@@ -103,6 +109,7 @@ def test_rear_ended_while_driving_lawfully_is_other():
     assert m.oracle == "collision" and v.fault is Fault.OTHER
     assert "rear half" in v.reason and v.evidence["ego_speed"] > 0.5
     assert v.evidence["peak_decel"] <= 3.5
+    assert v.evidence["kept_without_replay"] == "it drove lawfully in its lane and braked gently"
 
 
 # ------------------------------------------------------------------ junctions
