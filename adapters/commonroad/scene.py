@@ -187,10 +187,26 @@ def reference_path(rmap: RoadMap, route: tuple[str, ...], start_lane: str, start
         d = d / (np.hypot(*d) or 1.0)
         extra = past_goal - have + 1.0
         out = np.vstack([out, out[-1] + d * np.arange(1.0, extra + 1.0)[:, None]])
-    out = _resample(out, 1.0)
+    out = _within_a_turn(_resample(out, 1.0), gx, gy, past_goal)
     if edges_out is not None:
         edges_out.extend(edges)
     return out if max_curvature is None else _resample(limit_curvature(out, max_curvature), 1.0)
+
+
+def _within_a_turn(pts: np.ndarray, gx: float, gy: float, past_goal: float) -> np.ndarray:
+    """``pts`` (1 m apart), its part past the goal cut where its heading has turned beyond +-(2 pi - 0.5)
+    (the curvilinear frame refuses orientations outside +-2 pi: a continuation round a roundabout after
+    the goal did) and continued straight on instead, still ``past_goal`` metres past the goal."""
+    d = np.diff(pts, axis=0)
+    theta = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    out_of = np.flatnonzero(np.abs(theta) > 2.0 * math.pi - 0.5)
+    i_goal = int(np.argmin(np.hypot(pts[:, 0] - gx, pts[:, 1] - gy)))
+    if len(out_of) == 0 or out_of[0] <= i_goal + 2:
+        return pts  # within the limit, or beyond it before the goal (the planner cannot be set up then)
+    cut = pts[: out_of[0]]
+    u = (cut[-1] - cut[-2]) / (np.hypot(*(cut[-1] - cut[-2])) or 1.0)
+    extra = max(past_goal - (len(cut) - 1 - i_goal), 0.0)
+    return np.vstack([cut, cut[-1] + u * np.arange(1.0, extra + 1.0)[:, None]])
 
 
 def curvature(pts: np.ndarray) -> np.ndarray:
