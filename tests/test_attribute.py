@@ -357,21 +357,40 @@ def _careful_replay(sc):
     return ex.misbehaviors, ex.trace
 
 
-def test_a_car_that_enters_the_ring_without_yielding_is_kept_clear_of_by_a_careful_driver(tmp_path):
-    """The same case with the excuse tested (issue 31; before, other_failed_to_yield decided ``other`` and no
-    replay ran): the careful driver comes round the ring slower (4.9 m/s where the ego drove 7 m/s), meets v1
-    at its entry and keeps 3 m clear of it. v1 did not yield, but a careful driver would not have been struck:
-    the ego's, under right_of_way_avoidable."""
+@pytest.mark.parametrize("name, other, how", [
+    ("red_light_runner_into_the_side", "v2", "entered junction B1 on red"),
+    ("minor_road_car_does_not_yield", "v2", "a link that must yield"),
+])
+def test_a_right_of_way_violation_a_careful_driver_slows_for_is_the_egos(tmp_path, name, other, how):
+    """Kept as data (built by hand as test_red_light_runner_is_other and test_minor_road_car_not_yielding_is_other
+    build them): the clean reference ADS, which takes no account of a crossing car until it is in its corridor,
+    is struck by v2 running B1's red, or turning out of the minor road at B0. The rules excuse it (and before
+    issue 31 that decided ``other``); the careful driver, which predicts moving vehicles 3 s ahead, sees v2
+    coming, slows for it (from 10.5 to 0 m/s; from 7.4 to 1.1 m/s) and is not struck: the ego's, under
+    right_of_way_avoidable."""
+    sc, ex = kept_case(tmp_path, name)
+    m = ex.misbehaviors[0]
+    assert (m.oracle, m.actors) == ("collision", (other,))
+    rmap = load_roadmap(NET)
+    rules = attribute(sc, ex.trace, m, rmap)
+    assert rules.fault is Fault.OTHER and how in rules.reason  # the old order's verdict
+    v = attribute(sc, ex.trace, m, rmap, replay=_careful_replay)
+    assert v.fault is Fault.EGO and v.rule == "right_of_way_avoidable", v.reason
+    cf = v.evidence["counterfactual"]
+    assert cf["careful_speed_closest"] < 0.7 * cf["careful_speed_before"] and cf["careful_closest"] <= 15.0
+    assert v.reason.startswith(rules.reason + ", but a careful driver avoided it: it came no closer to v2")
+
+
+def test_a_careful_driver_that_passes_by_timing_leaves_the_excuse_standing(tmp_path):
+    """The twin (tests/data/ring_entry_fails_to_yield): v1 enters the ring from Nin_0 without yielding and strikes
+    the ego. The careful driver, slower round the ring, meets v1 7.9 m away without slowing for it (6.1 to 4.9
+    m/s): it came by at another time, which says nothing about care, and the excuse holds."""
     net = Path(NET).with_name("roundabout.net.xml")
     sc, ex = kept_case(tmp_path, "ring_entry_fails_to_yield", str(net))
     m = ex.misbehaviors[0]
     v = attribute(sc, ex.trace, m, load_roadmap(net), replay=_careful_replay)
-    assert v.fault is Fault.EGO and v.rule == "right_of_way_avoidable", v.reason
-    cf = v.evidence["counterfactual"]
-    assert cf["excuse"] == "other_failed_to_yield" and not cf["same_failure"]
-    assert 3.0 < cf["careful_closest"] <= 15.0  # it met v1, and kept clear
-    assert v.reason.startswith("the vehicle v1 came from Nin_0, a link that must yield")
-    assert "a careful driver avoided it" in v.reason
+    assert v.fault is Fault.OTHER and v.rule == "other_failed_to_yield", v.reason
+    assert v.reason.endswith("the careful driver's replay says nothing (it passed v1 without slowing for it)")
 
 
 @pytest.mark.parametrize("name, how", [

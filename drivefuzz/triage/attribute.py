@@ -50,7 +50,9 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   :data:`AVOIDED` (``stationary_struck`` -> ``stopped_in_the_way``, ``pedestrian`` -> ``pedestrian_avoidable``,
   ...), and its reason says what the careful driver did instead (how close it came to the other party, where
   and how fast it was at the event's time). A replay that never came within :data:`MET_M` of the other party
-  says nothing either: it passed before or after the other came, which is timing, not care. Three excuses hold
+  says nothing either: it passed before or after the other came, which is timing, not care; so does one that
+  passed another vehicle whose conduct is the excuse (cut in, ran a red, did not yield, struck from behind)
+  without slowing for it (:data:`VEHICLE_EXCUSES`). Three excuses hold
   without a replay (their evidence says why, under :data:`KEPT`), because the ego could not have been elsewhere
   in a way that matters:
 
@@ -227,6 +229,11 @@ AVOIDED: dict[str, str] = {
 #: [m] centre to centre: a careful driver whose replay never came this close to the other party never met it (it
 #: came by earlier or later): its keeping clear says nothing about the ego's excuse.
 MET_M = 15.0
+#: [s] before its closest approach to the other party over which the careful driver's slowing down counts.
+REACT_WINDOW = 3.0
+#: Excuses about another vehicle's conduct: the careful driver avoided it only if it slowed for the vehicle
+#: (:func:`_reacted`); one that came by at its cruising speed was elsewhere when the other came, by timing.
+VEHICLE_EXCUSES = frozenset({"cut_in", "other_ran_red", "other_failed_to_yield", "rear_ended"})
 #: The oracles of a standstill: an excuse of one (blocked, held up) holds when the careful driver fails either.
 STANDSTILL = frozenset({"immobility", "mission"})
 #: Evidence key of an excuse that holds without a replay (its value says why).
@@ -453,8 +460,18 @@ def test_excuse(scenario, trace, misbehavior, replay: Replay, verdict: Attributi
         return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing (it never met "
                                         f"{misbehavior.actors[0]}: {closest:.0f} m at the closest)", evidence,
                            verdict.rule)
+    if closest is not None and verdict.rule in VEHICLE_EXCUSES and not _reacted(instead[1]):
+        # it passed the other vehicle without slowing for it: it came by at another time, which is no care
+        return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing (it passed "
+                                        f"{misbehavior.actors[0]} without slowing for it)", evidence, verdict.rule)
     return Attribution(Fault.EGO, f"{verdict.reason}, but a careful driver avoided it: {instead[0]}", evidence,
                        AVOIDED[verdict.rule])
+
+
+def _reacted(ev: Mapping[str, Any]) -> bool:
+    """Whether the careful driver slowed for the other party: at its closest approach it drove below 70 % of its
+    fastest in the :data:`REACT_WINDOW` before, or below 1 m/s."""
+    return ev["careful_speed_closest"] < max(0.7 * ev["careful_speed_before"], 1.0)
 
 
 def _what_careful_did(ctrace, trace, mb) -> tuple[str, dict[str, Any]]:
@@ -477,7 +494,9 @@ def _what_careful_did(ctrace, trace, mb) -> tuple[str, dict[str, Any]]:
             j = int(np.nanargmin(d))
             gap = float(d[j]) - 0.5 * (float(tr.length) + EGO_LENGTH) if tr.kind == "vehicle" else \
                 float(d[j]) - 0.5 * EGO_LENGTH
-            ev.update(careful_closest=round(float(d[j]), 2), careful_speed_closest=round(float(v[j]), 2))
+            before = v[max(j - int(REACT_WINDOW / max(float(tc[1] - tc[0]), 1e-3)) if len(tc) > 1 else j, 0):j + 1]
+            ev.update(careful_closest=round(float(d[j]), 2), careful_speed_closest=round(float(v[j]), 2),
+                      careful_speed_before=round(float(np.nanmax(before)), 2))
             how = "stood" if v[j] <= STATIONARY_SPEED else f"drove at {float(v[j]):.1f} m/s"
             return (f"it came no closer to {who} than {float(d[j]):.1f} m centre to centre (about "
                     f"{max(gap, 0.0):.1f} m clear; it {how} then), and {where}", ev)
