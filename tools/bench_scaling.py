@@ -3,15 +3,19 @@
     python tools/bench_scaling.py [--jobs 1,2] [--budget 60] [--repeat 1] [--wait-quiet S] [--network NET]
     python tools/bench_scaling.py --jobs 1,4,8,16      # on a machine with 16 cores or more
 
-For each job count N it runs the same campaign (the network's committed seeds,
-repeated to N seeds where there are fewer, the clean reference ADS, strategy
-``all``, continuing after findings) for the same wall-clock budget: N = 1 in this
-process (what ``drivefuzz fuzz`` does), N > 1 on a local Dask cluster of N
-single-threaded workers (``--jobs N``). ``--repeat R`` runs R rounds of all the
+For each job count N it runs the same campaign (K seed jobs, K = the largest job
+count by default: the network's first committed seeds, repeated where there are
+fewer; the clean reference ADS, strategy ``all``, continuing after findings) for the
+same wall-clock budget: N = 1 in this process (what ``drivefuzz fuzz`` does), N > 1
+on a local Dask cluster of N single-threaded workers (``--jobs N``). With K = N the
+one job works through the same seeds, a lineage of each in turn, as the N jobs do
+at once: the same mix of work. With more seeds than jobs, one job reaches fewer of
+them in the budget than N jobs, and seeds differ in what a run costs and in how many
+new signatures (so triage reruns) they give. ``--repeat R`` runs R rounds of all the
 job counts, interleaved, and prints the median: the load of others on a shared
 machine drifts, and each round's N-job point is compared with its own 1-job point.
 
-Work done is counted three ways, from the campaign's journals:
+Work done is counted four ways, from the campaign's journals and the processes' CPU time:
 
     runs    executions plus triage reruns (the careful driver's replays, the reproduction
             reruns, the shrinking runs): the headline, "work done"
@@ -383,6 +387,9 @@ def main() -> None:
     ap.add_argument("--budget", type=float, default=60.0, help="wall seconds per point [60]")
     ap.add_argument("--repeat", type=int, default=1,
                     help="rounds of all the job counts, interleaved (1,2,1,2,...): the median is printed [1]")
+    ap.add_argument("--seeds", type=int, default=0, metavar="K",
+                    help="seed jobs in every point [the largest job count]: the network's seeds, repeated where "
+                         "there are fewer")
     ap.add_argument("--wait-quiet", type=float, default=0.0, metavar="S",
                     help="before each point, wait up to S seconds for the machine to be quiet (others < 0.2 cores)")
     ap.add_argument("--network", default=str(ROOT / "networks" / "town.net.xml"))
@@ -392,7 +399,7 @@ def main() -> None:
     seeds = [load_scenario(p) for p in list_seeds(ROOT / "seeds" / name)]
     if not seeds:
         sys.exit(f"no seeds in seeds/{name}/")
-    n_seeds = max(len(seeds), max(counts))
+    n_seeds = args.seeds or max(counts)
     seeds = [seeds[i % len(seeds)] for i in range(n_seeds)]  # a repeated seed is its own job (own random streams)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     print(f"machine: {cores} cores; network {name}, {n_seeds} seed jobs, {args.budget:.0f} s per point, "
