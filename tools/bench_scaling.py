@@ -32,6 +32,13 @@ fixed cost before it and is printed apart ("start-up"). The CPU column is work p
 CPU second of all the campaign's processes against the 1-job figure: what the
 campaign layer costs in CPU, whatever the load of others on the machine.
 
+On a shared machine the others' work takes CPU from N jobs first. The ESTIMATE line
+takes each job's waits for a CPU (the kernel's run-queue delay of the job's thread and
+of its simulation host, which run one at a time) out of its wall time: what the point
+would have done with a core free for every job. It also takes out the waits that the
+campaign's own other processes caused, so it is an upper estimate; the lead figure is
+the measured one.
+
 Then, per point, where the time went, one figure per stage (as ``bench_fuzz.py``):
 a column per process that runs jobs (the campaign process at N = 1, each Dask worker
 otherwise), the execution stages summed over its executions (the simulation-host
@@ -157,6 +164,49 @@ def _worker_threads() -> dict[str, float]:
     return thread_cpu("dask")
 
 
+def run_delay_s(pid: int, tids: list[int] | None = None) -> float:
+    """[s] the threads of process ``pid`` (or only ``tids``) have waited on a run queue: runnable, but no CPU was
+    free for them (the kernel's schedstat)."""
+    task = Path(f"/proc/{pid}/task")
+    total = 0
+    try:
+        tids = tids if tids is not None else [int(t.name) for t in task.iterdir()]
+    except OSError:
+        return 0.0
+    for tid in tids:
+        try:
+            total += int((task / str(tid) / "schedstat").read_text().split()[1])
+        except (OSError, ValueError, IndexError):
+            continue
+    return total / 1e9
+
+
+def _job_thread_delay(dask: bool = True) -> tuple[int, float]:
+    """(pid, run delay of the thread that runs jobs): a Dask worker's task thread (none before its first task),
+    or this process's main thread."""
+    if dask:
+        tids = [t.native_id for t in threading.enumerate() if "Dask-Default-Threads" in t.name]
+    else:
+        tids = [threading.main_thread().native_id]
+    return os.getpid(), run_delay_s(os.getpid(), tids)
+
+
+def chain_delays(names: dict[int, str], client=None) -> dict[str, float]:
+    """{job-running process: [s] its job thread and its simulation host have waited for a CPU}. Such a pair runs
+    one at a time (each waits on the other), so on a machine with a core free for every job they would not wait."""
+    import psutil
+
+    jobs = dict(client.run(_job_thread_delay).values()) if client is not None else dict([_job_thread_delay(False)])
+    out = {}
+    for pid, delay in jobs.items():
+        try:
+            hosts = [c.pid for c in psutil.Process(pid).children() if "drivefuzz.sim.simhost" in " ".join(c.cmdline())]
+        except psutil.Error:
+            hosts = []
+        out[names.get(pid, f"pid {pid}")] = delay + sum(run_delay_s(h) for h in hosts)
+    return out
+
+
 class _Timed:
     """Wall seconds the campaign process spends in one of its methods (bench-only wrapper)."""
 
@@ -186,12 +236,12 @@ def run_point(jobs: int, seeds, budget: float, workdir: Path, rep: int = 0) -> d
     point: dict = {"jobs": jobs, "load": load, "rep": rep}
     t0 = time.monotonic()
     if jobs == 1:
-        cpu0, busy0 = process_cpu({}), machine_busy()
+        names = {os.getpid(): "campaign process"}
+        cpu0, busy0, delay0 = process_cpu({}), machine_busy(), chain_delays(names)
         t_run = time.monotonic()
         campaign.run()
         t_end = time.monotonic()
-        cpu1, busy1 = process_cpu({}), machine_busy()
-        names = {os.getpid(): "campaign process"}
+        cpu1, busy1, delay1 = process_cpu({}), machine_busy(), chain_delays(names)
     else:
         from drivefuzz.campaign.cluster import dask_client
 
@@ -199,15 +249,16 @@ def run_point(jobs: int, seeds, budget: float, workdir: Path, rep: int = 0) -> d
             pids = client.run(os.getpid)
             names = {pid: f"worker {i + 1}" for i, pid in enumerate(sorted(pids.values()))}
             wt0 = client.run(_worker_threads)
-            cpu0, busy0 = process_cpu(names), machine_busy()
+            cpu0, busy0, delay0 = process_cpu(names), machine_busy(), chain_delays(names, client)
             t_run = time.monotonic()
             campaign.run(client=client)
             t_end = time.monotonic()
-            cpu1, busy1 = process_cpu(names), machine_busy()
+            cpu1, busy1, delay1 = process_cpu(names), machine_busy(), chain_delays(names, client)
             wt1 = client.run(_worker_threads)
             point["worker_threads"] = {names[pids[a]]: {k: v - wt0.get(a, {}).get(k, 0.0) for k, v in wt1[a].items()}
                                        for a in wt1 if a in pids}
     point["wall"] = t_end - t_run
+    point["delay"] = {k: max(v - delay0.get(k, 0.0), 0.0) for k, v in delay1.items()}
     point["startup"] = t_run - t0
     # --jobs 1 stops by the budget check between executions, not by STOP
     point["tail"] = t_end - stops[0] if stops else None
@@ -243,6 +294,7 @@ def read_work(out: Path) -> dict:
             acc[k] = acc.get(k, 0.0) + float(v)
     return {"execs": len(recs), "indexed": indexed, "runs": sum(r.get("runs", 1) for r in recs),
             "sim_s": sum(r.get("sim_s", 0.0) for r in recs), "stages": stages,
+            "runs_by_pid": {pid: sum(r.get("runs", 1) for r in recs if r["pid"] == pid) for pid in stages},
             "findings": len([p for p in (out / "findings").iterdir() if not p.name.startswith(".")]),
             "incidents": len([p for p in (out / "incidents").iterdir() if not p.name.startswith(".")])}
 
@@ -263,6 +315,9 @@ def print_point(p: dict) -> None:
           f"(+ {p['startup']:.1f} s cluster start-up before it); {p['findings']} findings, {p['incidents']} incidents; "
           f"load average before: {p['load'][0]:.2f} {p['load'][1]:.2f} {p['load'][2]:.2f}")
     print(f"    the rest of the machine (other users, the kernel) kept {p['others']:.2f} cores busy meanwhile")
+    if p.get("delay"):
+        print("    waiting for a CPU (run queue), each job's thread and its simulation host together: "
+              + ", ".join(f"{k} {v:.1f} s" for k, v in sorted(p["delay"].items())))
     if p["indexed"] != p["execs"]:
         print(f"    (the index holds {p['indexed']} executions, the journals {p['execs']})")
     if p["runs"]:
@@ -330,6 +385,20 @@ def print_cpu(p: dict) -> None:
     print(f"      campaign process: following the journals + indexing: {secs:.2f} s wall in {calls} polls")
 
 
+def quiet_rates(p: dict) -> dict[str, float]:
+    """Work per second that ``p`` would have done had no job waited for a CPU: each job's work over the wall time
+    less its run-queue waits (an estimate for a machine with a core free for every job; it also takes out the
+    waits that the campaign's own other processes caused)."""
+    rates = {"runs": 0.0, "host": 0.0}
+    pid_of = {name: pid for pid, name in p["names"].items()}
+    for chain, delay in p.get("delay", {}).items():
+        own_wall = max(p["wall"] - delay, 1e-9)
+        rates["runs"] += p["runs_by_pid"].get(pid_of.get(chain), 0) / own_wall
+        rates["host"] += sum(cpu for role, cpu in p["cpu"].values()
+                             if role in (f"simulation host of {chain}", f"simulation host of the {chain}")) / own_wall
+    return rates
+
+
 def efficiencies(p: dict, base: dict) -> dict[str, float]:
     """Work rate at ``p``'s job count over that many times the one-job rate of ``base``, by each measure of work
     (``host``: the simulation hosts' CPU seconds); ``cpu``: runs per CPU second of all the campaign's processes,
@@ -339,6 +408,9 @@ def efficiencies(p: dict, base: dict) -> dict[str, float]:
     one = {"runs": base["runs"], "sim_s": base["sim_s"], "execs": base["execs"], "host": _host_cpu(base)}
     eff = {k: (work[k] / p["wall"]) / (n * one[k] / base["wall"]) if one[k] else float("nan") for k in work}
     eff["cpu"] = (p["runs"] / _all_cpu(p)) / (base["runs"] / _all_cpu(base)) if base["runs"] else float("nan")
+    q, q1 = quiet_rates(p), quiet_rates(base)
+    for k in q:
+        eff[f"quiet_{k}"] = q[k] / (n * q1[k]) if q1[k] else float("nan")
     return eff
 
 
@@ -349,7 +421,8 @@ def print_summary(rows: list[dict]) -> None:
     effs: dict[int, list[dict[str, float]]] = {}
     for r in rows:
         base = next((b for b in rows if b["jobs"] == 1 and b["rep"] == r["rep"]), None)
-        eff = efficiencies(r, base) if base else dict.fromkeys(("runs", "sim_s", "host", "execs", "cpu"), math.nan)
+        eff = efficiencies(r, base) if base else dict.fromkeys(
+            ("runs", "sim_s", "host", "execs", "cpu", "quiet_runs", "quiet_host"), math.nan)
         effs.setdefault(r["jobs"], []).append(eff)
         print(f"{r['rep'] + 1:>5} {r['jobs']:>4} {r['load'][0]:>5.2f} {r['others']:>6.2f} {r['execs']:>6} "
               f"{r['runs']:>6} {r['sim_s']:>7.0f} {r['wall']:>7.1f} {3600 * r['runs'] / r['wall']:>8.0f}   {'':>11} "
@@ -379,6 +452,9 @@ def print_summary(rows: list[dict]) -> None:
         print(f"RESULT jobs={n}: efficiency {med['runs']:.2f} in work done (runs), {med['sim_s']:.2f} in simulated "
               f"seconds, {med['host']:.2f} in simulation-host CPU, {med['execs']:.2f} in executions only; "
               f"CPU {med['cpu']:.2f} ({what})")
+        print(f"ESTIMATE jobs={n} on a quiet machine (each job's waits for a CPU taken out of its wall time): "
+              f"efficiency {med['quiet_runs']:.2f} in work done (runs), {med['quiet_host']:.2f} in simulation-host "
+              f"CPU")
 
 
 def main() -> None:
