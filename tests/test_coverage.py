@@ -234,6 +234,14 @@ def test_coverage_command_and_a_resume_sums_to_one_straight_run(tmp_path):
     assert text.output.startswith(f"coverage {cov['reached']}/{cov['reachable']} cells")
     for name in ("party x manoeuvre", "party x element", "speed x condition", "never reached"):
         assert name in text.output
+    # the report's coverage map: a grid per projection, the reached cells' counts
+    rep = CliRunner().invoke(main, ["report", str(a), "--max-cards", "0", "--no-animation"])
+    assert rep.exit_code == 0, rep.output
+    page = (a / "report.html").read_text()
+    assert "<h2>Interaction coverage</h2>" in page and page.count('<table class="cov">') == len(PROJECTIONS)
+    top = max(cov["cells"].values(), key=lambda h: h["count"])
+    assert f'>{top["count"]}{"F" if top["findings"] else ""}</td>' in page
+    assert "## Interaction coverage" in (a / "report.md").read_text()
 
 
 def test_coverage_of_a_folder_that_is_no_campaign_is_one_line_and_exit_2(tmp_path):
