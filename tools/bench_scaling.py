@@ -232,16 +232,15 @@ def run_point(jobs: int, seeds, budget: float, workdir: Path, rep: int = 0) -> d
     request_stop = campaign.request_stop
     campaign.request_stop = lambda: (stops.append(time.monotonic()), request_stop())
     load = os.getloadavg()
-    threads0 = thread_cpu()
     point: dict = {"jobs": jobs, "load": load, "rep": rep}
     t0 = time.monotonic()
     if jobs == 1:
         names = {os.getpid(): "campaign process"}
-        cpu0, busy0, delay0 = process_cpu({}), machine_busy(), chain_delays(names)
+        cpu0, busy0, delay0, threads0 = process_cpu({}), machine_busy(), chain_delays(names), thread_cpu()
         t_run = time.monotonic()
         campaign.run()
         t_end = time.monotonic()
-        cpu1, busy1, delay1 = process_cpu({}), machine_busy(), chain_delays(names)
+        cpu1, busy1, delay1, threads1 = process_cpu({}), machine_busy(), chain_delays(names), thread_cpu()
     else:
         from drivefuzz.campaign.cluster import dask_client
 
@@ -250,10 +249,12 @@ def run_point(jobs: int, seeds, budget: float, workdir: Path, rep: int = 0) -> d
             names = {pid: f"worker {i + 1}" for i, pid in enumerate(sorted(pids.values()))}
             wt0 = client.run(_worker_threads)
             cpu0, busy0, delay0 = process_cpu(names), machine_busy(), chain_delays(names, client)
+            threads0 = thread_cpu()  # here: Dask's threads in this process live as long as the cluster
             t_run = time.monotonic()
             campaign.run(client=client)
             t_end = time.monotonic()
             cpu1, busy1, delay1 = process_cpu(names), machine_busy(), chain_delays(names, client)
+            threads1 = thread_cpu()
             wt1 = client.run(_worker_threads)
             point["worker_threads"] = {names[pids[a]]: {k: v - wt0.get(a, {}).get(k, 0.0) for k, v in wt1[a].items()}
                                        for a in wt1 if a in pids}
@@ -262,7 +263,6 @@ def run_point(jobs: int, seeds, budget: float, workdir: Path, rep: int = 0) -> d
     point["startup"] = t_run - t0
     # --jobs 1 stops by the budget check between executions, not by STOP
     point["tail"] = t_end - stops[0] if stops else None
-    threads1 = thread_cpu()
     point["cpu"] = {pid: (role, cpu - cpu0.get(pid, (role, 0.0))[1]) for pid, (role, cpu) in cpu1.items()}
     # what the rest of the machine ran meanwhile: [cores], on average over the point
     point["others"] = max(busy1 - busy0 - sum(cpu for _, cpu in point["cpu"].values()), 0.0) / point["wall"]
