@@ -23,7 +23,9 @@ infeasible"; commonroad-clcs 2025.x (which the planner's own requirements bring)
 ``CurvilinearProjectionDomainLateralError`` or ``...LongitudinalError`` instead, so one sample that
 leaves the domain aborts the whole cycle (on the town seed 000, 36 of 324 cycles on a straight road).
 :class:`DomainAsNone` turns those two exceptions back into None; ``domain_shim=false`` shows the
-planner as installed. docs/bugs/commonroad-reactive-planner.md, bug 1.
+planner as installed. docs/bugs/commonroad-reactive-planner.md, bug 1. A second fix (option ``mode_fix``,
+on by default) sets the planner's velocity mode before ``reset()`` converts the car's state (bug 3).
+Both are recorded in the options the trace's scenario carries; every other setting is the planner's own.
 """
 
 from __future__ import annotations
@@ -92,15 +94,15 @@ class ReactivePlannerADS(CommonRoadADS):
 
     class Options(CommonRoadADS.Options):
         domain_shim: bool = True  # samples out of the projection domain are infeasible, not an exception
-        # [m/s] the planner's own switch to its low-velocity sampling (4.0, as shipped); see bug 3 in
-        # docs/bugs/commonroad-reactive-planner.md: below it, in a bend, no sample was feasible
+        # [m/s] the planner's own switch to its low-velocity sampling (4.0, as shipped)
         low_vel_threshold: float = Field(4.0, ge=0.0)
         # the planner's continuous collision check (off, as shipped): off, it checks only the poses at its time
         # steps, and a pedestrian crossing between two of them is not seen (bug 4)
         continuous_check: bool = False
         # reset() converts the car's state into the curvilinear frame in the previous cycle's velocity mode
-        # (plan() switches the mode only afterwards): true sets the mode first (bug 3); false: as shipped
-        mode_fix: bool = False
+        # (plan() switches the mode only afterwards): true (default) sets the mode first; false: as shipped,
+        # where the first cycle below 4 m/s in a bend has no feasible sample (bug 3; 8 of 44 seeds fail on it)
+        mode_fix: bool = True
 
     def make_planner(self, reference: np.ndarray, params: VehicleParams) -> None:
         dt = self.options.planner_dt
