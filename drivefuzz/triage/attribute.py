@@ -50,9 +50,9 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   :data:`AVOIDED` (``stationary_struck`` -> ``stopped_in_the_way``, ``pedestrian`` -> ``pedestrian_avoidable``,
   ...), and its reason says what the careful driver did instead (how close it came to the other party, where
   and how fast it was at the event's time). A replay that never came within :data:`MET_M` of the other party
-  says nothing either: it passed before or after the other came, which is timing, not care; so does one that
-  passed another vehicle whose conduct is the excuse (cut in, ran a red, did not yield, struck from behind)
-  without slowing for it (:data:`VEHICLE_EXCUSES`). Three excuses hold
+  and was farther than that from the place at the event's time says nothing either: it passed before or after
+  the other came, which is timing, not care; so does one that passed another vehicle whose conduct is the
+  excuse (ran a red, did not yield, struck from behind) without slowing for it (:data:`VEHICLE_EXCUSES`). Three excuses hold
   without a replay (their evidence says why, under :data:`KEPT`), because the ego could not have been elsewhere
   in a way that matters:
 
@@ -226,14 +226,16 @@ AVOIDED: dict[str, str] = {
     "queue": "blocked_avoidable",
     "held_up": "blocked_avoidable",
 }
-#: [m] centre to centre: a careful driver whose replay never came this close to the other party never met it (it
-#: came by earlier or later): its keeping clear says nothing about the ego's excuse.
+#: [m] centre to centre: a careful driver whose replay never came this close to the other party, and was farther
+#: than this from the event's place at its time, never met it (it came by earlier or later): its keeping clear
+#: says nothing about the ego's excuse.
 MET_M = 15.0
 #: [s] before its closest approach to the other party over which the careful driver's slowing down counts.
 REACT_WINDOW = 3.0
-#: Excuses about another vehicle's conduct: the careful driver avoided it only if it slowed for the vehicle
-#: (:func:`_reacted`); one that came by at its cruising speed was elsewhere when the other came, by timing.
-VEHICLE_EXCUSES = frozenset({"cut_in", "other_ran_red", "other_failed_to_yield", "rear_ended"})
+#: Excuses about another vehicle's conduct at a junction or from behind: the careful driver avoided it only if it
+#: slowed for the vehicle (:func:`_reacted`); one that came by at its cruising speed was elsewhere when the other
+#: came, by timing. (A cut-in is not among them: the careful driver's longer headway is the care that avoids it.)
+VEHICLE_EXCUSES = frozenset({"other_ran_red", "other_failed_to_yield", "rear_ended"})
 #: The oracles of a standstill: an excuse of one (blocked, held up) holds when the careful driver fails either.
 STANDSTILL = frozenset({"immobility", "mission"})
 #: Evidence key of an excuse that holds without a replay (its value says why).
@@ -456,7 +458,8 @@ def test_excuse(scenario, trace, misbehavior, replay: Replay, verdict: Attributi
         return Attribution(Fault.OTHER, f"{verdict.reason}; a careful driver stood there too at "
                                         f"{misbehavior.time:.1f} s", evidence, verdict.rule)
     closest = instead[1].get("careful_closest")
-    if closest is not None and closest > MET_M:  # it never met the other party: timing, not care, spared it
+    far = instead[1]["careful_distance_to_place"] > MET_M
+    if closest is not None and closest > MET_M and far:  # it never met the other party: timing, not care
         return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing (it never met "
                                         f"{misbehavior.actors[0]}: {closest:.0f} m at the closest)", evidence,
                            verdict.rule)
