@@ -378,7 +378,7 @@ def test_a_right_of_way_violation_a_careful_driver_slows_for_is_the_egos(tmp_pat
     assert v.fault is Fault.EGO and v.rule == "right_of_way_avoidable", v.reason
     cf = v.evidence["counterfactual"]
     assert cf["careful_speed_closest"] < 0.7 * cf["careful_speed_before"] and cf["careful_closest"] <= 15.0
-    assert v.reason.startswith(rules.reason + ", but a careful driver avoided it: it came no closer to v2")
+    assert v.reason.startswith(rules.reason + ", but the careful driver's replay avoided it: it came no closer to v2")
 
 
 def test_a_careful_driver_that_passes_by_timing_leaves_the_excuse_standing(tmp_path):
@@ -413,7 +413,7 @@ def test_a_walker_an_ads_did_not_predict_is_its_fault_when_a_careful_driver_keep
     assert v.fault is Fault.EGO and v.rule == "pedestrian_avoidable", v.reason
     cf = v.evidence["counterfactual"]
     assert cf["excuse"] == "pedestrian" and not cf["same_failure"] and cf["careful_closest"] <= 15.0
-    assert v.reason.startswith(rules.reason + ", but a careful driver avoided it: it came no closer to")
+    assert v.reason.startswith(rules.reason + ", but the careful driver's replay avoided it: it came no closer to")
     clean = execute(sc.model_copy(update={"ads": AdsSpec(name="ego")}), oracles=oracles())
     assert not [c for c in clean.misbehaviors if c.actors == m.actors]  # the clean ADS never meets her
 
@@ -584,7 +584,8 @@ def test_a_car_that_stopped_in_a_walkers_path_is_the_egos_when_a_careful_driver_
     assert v.fault is Fault.EGO and v.rule == "stopped_in_the_way", v.reason
     cf = v.evidence["counterfactual"]
     assert cf["excuse"] == "stationary_struck" and not cf["same_failure"]
-    assert cf["careful_closest"] > 3.0 and "a careful driver avoided it: it came no closer to p3 than" in v.reason
+    assert cf["careful_closest"] > 3.0
+    assert "the careful driver's replay avoided it: it came no closer to p3 than" in v.reason
 
 
 def test_changing_lanes_into_a_car_alongside_is_ego():

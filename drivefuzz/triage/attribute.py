@@ -467,7 +467,7 @@ def test_excuse(scenario, trace, misbehavior, replay: Replay, verdict: Attributi
         # it passed the other vehicle without slowing for it: it came by at another time, which is no care
         return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing (it passed "
                                         f"{misbehavior.actors[0]} without slowing for it)", evidence, verdict.rule)
-    return Attribution(Fault.EGO, f"{verdict.reason}, but a careful driver avoided it: {instead[0]}", evidence,
+    return Attribution(Fault.EGO, f"{verdict.reason}, but the careful driver's replay avoided it: {instead[0]}", evidence,
                        AVOIDED[verdict.rule])
 
 
