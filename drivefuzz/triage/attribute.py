@@ -45,16 +45,17 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   ``replay``: several rules measure the situation with the ego's own speed and place, which its bug chose (a
   walker "walked into its side": into a car that should not have been there; an ego "stationary when struck"
   may have stopped where a careful driver would not). An excusing rule's ``other`` holds only if the careful
-  driver fails the same way (same oracle, same other party), or its replay says nothing about the event (it
-  failed first, never came near, did not run); otherwise the verdict is the ego's, under the rule of
+  driver fails the same way (same oracle, same other party; for a standstill, :data:`STANDSTILL`, it stands
+  still or times out too, or stood at the same place at the event's time), or its replay says nothing about
+  the event (it failed first, never came near, did not run); otherwise the verdict is the ego's, under the rule of
   :data:`AVOIDED` (``stationary_struck`` -> ``stopped_in_the_way``, ``pedestrian`` -> ``pedestrian_avoidable``,
   ...), and its reason says what the careful driver did instead (how close it came to the other party, where
   and how fast it was at the event's time). A replay that never came within :data:`MET_M` of the other party
   and was farther than that from the place at the event's time says nothing either: it passed before or after
   the other came, which is timing, not care; so does one that passed another vehicle whose conduct is the
-  excuse (ran a red, did not yield, struck from behind) without slowing for it (:data:`VEHICLE_EXCUSES`). Three excuses hold
-  without a replay (their evidence says why, under :data:`KEPT`), because the ego could not have been elsewhere
-  in a way that matters:
+  excuse (ran a red, did not yield, struck from behind) without slowing for it (:data:`VEHICLE_EXCUSES`).
+  Three excuses hold without a replay (their evidence says why, under :data:`KEPT`), because the ego could not
+  have been elsewhere in a way that matters:
 
   - *stationary*, struck in its rear half by a vehicle that did not slow by more than 1 m/s in the
     :data:`APPROACH_WINDOW`: such a car strikes whatever stands or drives slower in that lane, wherever the
@@ -467,8 +468,8 @@ def test_excuse(scenario, trace, misbehavior, replay: Replay, verdict: Attributi
         # it passed the other vehicle without slowing for it: it came by at another time, which is no care
         return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing (it passed "
                                         f"{misbehavior.actors[0]} without slowing for it)", evidence, verdict.rule)
-    return Attribution(Fault.EGO, f"{verdict.reason}, but the careful driver's replay avoided it: {instead[0]}", evidence,
-                       AVOIDED[verdict.rule])
+    return Attribution(Fault.EGO, f"{verdict.reason}, but the careful driver's replay avoided it: {instead[0]}",
+                       evidence, AVOIDED[verdict.rule])
 
 
 def _reacted(ev: Mapping[str, Any]) -> bool:
