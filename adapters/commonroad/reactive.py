@@ -21,7 +21,8 @@ One fix of the planner's contract (option ``domain_shim``, on by default): its k
 coordinate system for each sample's Cartesian points and treats None as "out of the projection domain,
 infeasible"; commonroad-clcs 2025.x (which the planner's own requirements bring) raises
 ``CurvilinearProjectionDomainLateralError`` or ``...LongitudinalError`` instead, so one sample that
-leaves the domain aborts the whole cycle (on the town seed 000, 36 of 324 cycles on a straight road).
+leaves the domain aborts the whole cycle (on the town seed 000, 36 of 324 cycles on a straight road with
+the first, unsmoothed reference; the trace's ``ads_info.domain_shim_caught`` counts the catches).
 :class:`DomainAsNone` turns those two exceptions back into None; ``domain_shim=false`` shows the
 planner as installed. docs/bugs/commonroad-reactive-planner.md, bug 1. A second fix (option ``mode_fix``,
 on by default) sets the planner's velocity mode before ``reset()`` converts the car's state (bug 3).
@@ -82,10 +83,13 @@ def planner_config(params: VehicleParams, dt: float, steps: int) -> ReactivePlan
 class DomainAsNone(CoordinateSystem):
     """The planner's coordinate system, answering None (as the planner expects) where clcs 2025.x raises."""
 
+    caught = 0  # exceptions turned into None (per instance once one is caught)
+
     def convert_to_cartesian_coords(self, s: float, d: float):
         try:
             return super().convert_to_cartesian_coords(s, d)
         except (CurvilinearProjectionDomainLateralError, CurvilinearProjectionDomainLongitudinalError):
+            self.caught += 1
             return None
 
 
@@ -119,6 +123,13 @@ class ReactivePlannerADS(CommonRoadADS):
         cls = DomainAsNone if self.options.domain_shim else CoordinateSystem
         self.planner.set_reference_path(coordinate_system=cls(reference, clcs_params=CLCSParams(
             processing_option=ProcessingOption.RESAMPLE)))
+
+    def trace_info(self) -> dict:
+        """The base class's record, and how many samples the domain shim turned from an exception into None."""
+        info = super().trace_info()
+        co = getattr(getattr(self, "planner", None), "coordinate_system", None)
+        info["domain_shim_caught"] = getattr(co, "caught", 0)
+        return info
 
     def plan(self, state: CarState, checker, desired_speed: float) -> Plan | None:
         planner = self.planner
