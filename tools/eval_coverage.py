@@ -117,7 +117,8 @@ def main(argv: list[str] | None = None) -> int:
             shares[fb] = [r["share"] for r in rows]
             pooled[fb].extend(shares[fb])
         for fb in configs:
-            p = "" if fb == "random" or "random" not in shares else f"{mann_whitney_p(shares[fb], shares['random']):9.4f}"
+            p = "" if fb == "random" or "random" not in shares else \
+                f"{mann_whitney_p(shares[fb], shares['random']):9.4f}"
             cells = next((r["reachable"] for r in clean if r["network"] == net), 0)
             print(f"{net:<14}{cells:>6}  {fb:<8}" + "".join(f"{100 * s:>6.1f}%" for s in shares[fb])
                   + f"{100 * statistics.mean(shares[fb]):>7.1f}%{p}")
