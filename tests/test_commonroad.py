@@ -170,6 +170,11 @@ def test_a_planner_that_returns_nothing_leaves_the_car_braking_at_rest(town_scen
     assert float(np.max(ex.trace["throttle"])) == 0.0
 
 
+def test_an_ads_without_a_record_leaves_the_trace_as_it_was(town_scenario):
+    ex = execute(_short(town_scenario, 0.5), ads=load_ads("ego"), oracles=[])
+    assert "ads_info" not in ex.trace.meta
+
+
 def test_the_options_are_validated():
     from drivefuzz.errors import InvalidConfig
 
