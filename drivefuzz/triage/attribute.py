@@ -407,25 +407,38 @@ def careful_scenario(scenario):
     return scenario.model_copy(update={"ads": AdsSpec(name=CAREFUL_ADS, options=options)})
 
 
-def counterfactual(scenario, misbehavior, replay: Replay, verdict: Attribution) -> Attribution:
-    """Drive ``scenario`` with the careful driver; the same failure makes the verdict ``other``."""
-    careful = careful_scenario(scenario)
-    others, _trace = replay(careful)
-    same = [m for m in others if m.oracle == misbehavior.oracle and set(m.actors) == set(misbehavior.actors)]
+def _careful_replay(scenario, misbehavior, replay: Replay, verdict: Attribution, same_failure, **record):
+    """The careful driver's replay of ``scenario``: (its misbehaviours, its trace, those that are the same failure
+    as ``misbehavior`` by ``same_failure``, the verdict's evidence with the replay's record, and why the replay says
+    nothing about the event, or None: it failed first, did not run, or never came near the place)."""
+    others, ctrace = replay(careful_scenario(scenario))
+    same = [m for m in others if same_failure(m)]
     evidence = dict(verdict.evidence)
     evidence["counterfactual"] = {"ads": CAREFUL_ADS, "misbehaviors": [f"{m.oracle}/{m.kind}" for m in others],
-                                  "same_failure": bool(same)}
+                                  "same_failure": bool(same), **record}
+    earlier = [m for m in others if m.time <= misbehavior.time]
+    silent = None
+    if ctrace is None or earlier or not _reached(ctrace, misbehavior.position):
+        silent = (f"it failed first: {earlier[0].oracle}/{earlier[0].kind} at {earlier[0].time:.1f} s" if earlier else
+                  "it did not run" if ctrace is None else "it never came near the place")
+    return others, ctrace, same, evidence, silent
+
+
+def _same_oracle_and_party(misbehavior):
+    return lambda m: m.oracle == misbehavior.oracle and set(m.actors) == set(misbehavior.actors)
+
+
+def counterfactual(scenario, misbehavior, replay: Replay, verdict: Attribution) -> Attribution:
+    """Drive ``scenario`` with the careful driver; the same failure makes the verdict ``other``."""
+    _others, _trace, same, evidence, silent = _careful_replay(scenario, misbehavior, replay, verdict,
+                                                             _same_oracle_and_party(misbehavior))
     if same:
         m = same[0]
         return Attribution(Fault.OTHER, f"a careful driver could not avoid it either ({m.oracle}/{m.kind} "
                                         f"at {m.time:.1f} s)", evidence, verdict.rule)
-    earlier = [m for m in others if m.time <= misbehavior.time]
-    if _trace is None or earlier or not _reached(_trace, misbehavior.position):
-        # it never got there: the replay says nothing about this event
-        what = (f"{earlier[0].oracle}/{earlier[0].kind} at {earlier[0].time:.1f} s" if earlier else
-                "did not run" if _trace is None else "never came near the place")
-        return Attribution(Fault.UNCLEAR, verdict.reason + f"; the careful driver's replay failed first ({what})",
-                           evidence, verdict.rule)
+    if silent is not None:  # it never got there: the replay says nothing about this event
+        return Attribution(Fault.UNCLEAR, verdict.reason + f"; the careful driver's replay failed first "
+                           f"({silent.removeprefix('it failed first: ').removeprefix('it ')})", evidence, verdict.rule)
     return Attribution(verdict.fault, verdict.reason + "; a careful driver avoided it", evidence, verdict.rule)
 
 
@@ -434,23 +447,16 @@ def test_excuse(scenario, trace, misbehavior, replay: Replay, verdict: Attributi
     :data:`AVOIDED`): it holds if the careful driver fails the same way (same oracle, same other party), or if the
     replay says nothing (it failed first, never came near the place, or did not run); otherwise the verdict is
     the ego's, and its reason says what the careful driver did instead."""
-    careful = careful_scenario(scenario)
-    others, ctrace = replay(careful)
     stuck = misbehavior.oracle in STANDSTILL  # held up or blocked: standing still and timing out are one failure
-    same = [m for m in others if (m.oracle in STANDSTILL if stuck else
-                                  m.oracle == misbehavior.oracle and set(m.actors) == set(misbehavior.actors))]
-    evidence = dict(verdict.evidence)
-    evidence["counterfactual"] = {"ads": CAREFUL_ADS, "misbehaviors": [f"{m.oracle}/{m.kind}" for m in others],
-                                  "same_failure": bool(same), "excuse": verdict.rule}
+    same_failure = (lambda m: m.oracle in STANDSTILL) if stuck else _same_oracle_and_party(misbehavior)
+    _others, ctrace, same, evidence, silent = _careful_replay(scenario, misbehavior, replay, verdict, same_failure,
+                                                              excuse=verdict.rule)
     if same:
         m = same[0]
         return Attribution(Fault.OTHER, f"{verdict.reason}; a careful driver could not avoid it either ({m.oracle}/"
                                         f"{m.kind} at {m.time:.1f} s)", evidence, verdict.rule)
-    earlier = [m for m in others if m.time <= misbehavior.time]
-    if ctrace is None or earlier or not _reached(ctrace, misbehavior.position):
-        what = (f"it failed first: {earlier[0].oracle}/{earlier[0].kind} at {earlier[0].time:.1f} s" if earlier else
-                "it did not run" if ctrace is None else "it never came near the place")
-        return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing ({what})",
+    if silent is not None:
+        return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing ({silent})",
                            evidence, verdict.rule)
     instead = _what_careful_did(ctrace, trace, misbehavior)
     evidence["counterfactual"].update(instead[1])
