@@ -74,22 +74,11 @@ from drivefuzz.campaign.fuzz import Campaign, FuzzConfig  # noqa: E402
 from drivefuzz.scenario.seed import list_seeds  # noqa: E402
 from drivefuzz.scenario.sumofiles import load_scenario  # noqa: E402
 
-#: (key of an execution record's timings, label); the first eight run in the simulation host
-STAGES = [
-    ("sumo", "SUMO start + stepping"),
-    ("physics", "physics (+ moveToXY)"),
-    ("ads", "ADS under test"),
-    ("observe", "ADS observation"),
-    ("world", "world read-out"),
-    ("record", "trace recording"),
-    ("oracles", "oracles"),
-    ("setup", "execution setup"),
-    ("isolation", "crash isolation (IPC)"),
-    ("quality", "feedback (risk + quality)"),
-    ("triage", "triage (+ its reruns)"),
-    ("mutation", "mutation (+ retries)"),
-    ("storage", "storage"),
-]
+from bench_fuzz import STAGES as FUZZ_STAGES  # noqa: E402  (the same stages and labels as bench_fuzz's table)
+
+#: (key of an execution record's timings, label): bench_fuzz's stages, of which the first eight run in the
+#: simulation host; crash isolation (the hand-over from the host) comes right after them here
+STAGES = FUZZ_STAGES[:8] + sorted(FUZZ_STAGES[8:], key=lambda stage: stage[0] != "isolation")
 
 
 # ------------------------------------------------------------------------------ processes
