@@ -942,9 +942,10 @@ def test_every_rule_a_verdict_names_is_described():
     import re
 
     from drivefuzz.triage import attribute as attribute_module
+    from drivefuzz.triage import standstill
     from drivefuzz.triage.attribute import RULES, bug_class
 
-    source = inspect.getsource(attribute_module)
+    source = inspect.getsource(attribute_module) + inspect.getsource(standstill)  # the rules, standstills apart
     named = set(re.findall(r'self\.(?:ego|other)\(\s*"(\w+)"', source))
     named |= set(re.findall(r'Attribution\(Fault\.\w+, [^\n]*"(\w+)"\)$', source, re.M))
     named |= set(re.findall(r'\{"frame": misbehavior\.frame\}, "(\w+)"', source))
@@ -979,7 +980,7 @@ def test_a_finding_on_ice_that_a_careful_driver_mastered_names_the_ice(tmp_path)
 
 def test_free_lanes_are_listed_in_english():
     """A highway finding read 'although hw1-AddedOffRampEdge_2, hw1-AddedOffRampEdge_1 was free'."""
-    from drivefuzz.triage.attribute import _were_free
+    from drivefuzz.triage.standstill import _were_free
 
     assert _were_free(["A0B0_2"]) == "A0B0_2 was free"
     assert _were_free(["a_2", "a_1"]) == "a_2 and a_1 were free"

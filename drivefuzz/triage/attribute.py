@@ -41,21 +41,12 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   the ego). An ego that crept (below the stationary speed) into a parked car, or drove into a car
   that stood in a junction it had entered on red, struck it.
 
-- **Excuses are hypotheses** that the careful driver's replay tests (:func:`test_excuse`), when the caller gives
-  ``replay``: several rules measure the situation with the ego's own speed and place, which its bug chose (a
-  walker "walked into its side": into a car that should not have been there; an ego "stationary when struck"
-  may have stopped where a careful driver would not). An excusing rule's ``other`` holds only if the careful
-  driver fails the same way (same oracle, same other party; for a standstill, :data:`STANDSTILL`, it stands
-  still or times out too, or stood at the same place at the event's time), or its replay says nothing about
-  the event (it failed first, never came near, did not run); otherwise the verdict is the ego's, under the rule of
-  :data:`AVOIDED` (``stationary_struck`` -> ``stopped_in_the_way``, ``pedestrian`` -> ``pedestrian_avoidable``,
-  ...), and its reason says what the careful driver did instead (how close it came to the other party, where
-  and how fast it was at the event's time). A replay that never came within :data:`MET_M` of the other party
-  and was farther than that from the place at the event's time says nothing either: it passed before or after
-  the other came, which is timing, not care; so does one that passed another vehicle whose conduct is the
-  excuse (ran a red, did not yield, struck from behind) without slowing for it (:data:`VEHICLE_EXCUSES`).
-  Three excuses hold without a replay (their evidence says why, under :data:`KEPT`), because the ego could not
-  have been elsewhere in a way that matters:
+- **Excuses are hypotheses** that the careful driver's replay tests
+  (:func:`drivefuzz.triage.counterfactual.test_excuse`, which says when the excuse holds), when the caller gives
+  ``replay``: an excusing rule's ``other`` holds only if the careful driver fails the same way, or its replay says
+  nothing about the event; otherwise the verdict is the ego's, under the rule of :data:`AVOIDED`, and its reason
+  says what the careful driver did instead. Three excuses hold without a replay (their evidence says why, under
+  :data:`KEPT`), because the ego could not have been elsewhere in a way that matters:
 
   - *stationary*, struck in its rear half by a vehicle that did not slow by more than 1 m/s in the
     :data:`APPROACH_WINDOW`: such a car strikes whatever stands or drives slower in that lane, wherever the
@@ -70,12 +61,12 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   Without ``replay`` an excuse stands from the rules alone (the triage's first, cheap verdict that names the
   signature; :func:`needs_replay` says which verdicts the triage must replay before it files them).
 
-- **Avoidability by counterfactual replay**: when no rule excuses the ego and the caller gives
-  ``replay``, the same scenario is driven by the careful reference driver (ADS ``careful``,
-  :mod:`ego.careful`). If it fails the same way (same oracle, same other party), the situation
-  was unavoidable: ``other``. Not after a rule that found the ego's own fault (it entered on red;
-  it stayed behind a stationary body with a lane free): the careful driver would share the one
-  (it does not overtake either) and never meet the other. A red light run is the ego's without a replay,
+- **Avoidability by counterfactual replay** (:func:`drivefuzz.triage.counterfactual.counterfactual`): when no
+  rule excuses the ego and the caller gives ``replay``, the same scenario is driven by the careful reference
+  driver (ADS ``careful``, :mod:`ego.careful`). If it fails the same way (same oracle, same other party), the
+  situation was unavoidable: ``other``. Not after a rule that found the ego's own fault (it entered on red; it
+  stayed behind a stationary body with a lane free): the careful driver would share the one (it does not
+  overtake either) and never meet the other. A red light run is the ego's without a replay,
   unless it met ice on the way in (the careful driver may not stop on it either). Lane keeping is replayed
   only on ice or in a strong crosswind (the careful driver tracks its path as the reference does), and a
   mission time-out only when the ego kept moving (fog, rain and ice slow a careful driver too, and a time
@@ -92,13 +83,9 @@ Units: SI; positions are body centres; headings radians ENU (as in the trace).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from enum import Enum
-from typing import Any, Callable, Mapping, Sequence
-
 import numpy as np
 
-from drivefuzz.scenario.model import CAREFUL_DECEL, CAREFUL_REACTION, EGO_LENGTH, EGO_WIDTH, AdsSpec
+from drivefuzz.scenario.model import CAREFUL_DECEL, CAREFUL_REACTION, EGO_LENGTH, EGO_WIDTH
 from drivefuzz.triage.evidence import (
     COMFORT_DECEL,
     G,
@@ -106,7 +93,6 @@ from drivefuzz.triage.evidence import (
     STATIONARY_SPEED,
     Track,
     actor_track,
-    blocked_lanes,
     contact_point,
     contact_side,
     cut_in,
@@ -115,10 +101,8 @@ from drivefuzz.triage.evidence import (
     first_visible,
     frames_before,
     gap_ahead,
-    held_up,
     kept_lane,
     lane_changed,
-    never_moved,
     other_link,
     path_entry,
     ran_red,
@@ -130,6 +114,21 @@ from drivefuzz.triage.evidence import (
     to_local,
     wrap_angle,
 )
+# the verdict's vocabulary and the careful driver's replay, importable from here as before the split
+from drivefuzz.triage.counterfactual import (  # noqa: F401
+    CAREFUL_ADS,
+    MET_M,
+    REACHED_M,
+    STANDSTILL,
+    VEHICLE_EXCUSES,
+    Replay,
+    careful_scenario,
+    counterfactual,
+    test_excuse,
+)
+from drivefuzz.triage.standstill import StandstillRules
+from drivefuzz.triage.verdict import AVOIDED, KEPT, RULES, Attribution, Fault, bug_class, needs_replay  # noqa: F401
+
 
 #: [s] before a contact, over which the rules that excuse a struck ego look for the other body's approach.
 APPROACH_WINDOW = 2.0
@@ -154,145 +153,9 @@ def _travelled(x: np.ndarray, y: np.ndarray) -> float:
 NO_COUNTERFACTUAL = frozenset({"lane_invasion", "immobility", "mission"})
 #: [m] a sensor range below which fog and rain count as the cause of a slow journey.
 SHORT_SIGHT = 50.0
-#: [m] room a driver needs past a stationary body to merge back into a lane that leads on along the route.
-MERGE_ROOM = 20.0
-#: [m] how close the careful driver's replay must come to the event's place to say anything about it.
-REACHED_M = 10.0
-#: The ADS the counterfactual replay uses.
-CAREFUL_ADS = "careful"
 #: [m/s] a crosswind from which a lane may be lost however carefully one drives (Beaufort 5, a fresh breeze;
 #: below it the car's drift is centimetres): then the careful driver's replay may settle a lane invasion.
 WINDY = 8.0
-
-Replay = Callable[[Any], tuple[Sequence[Any], Any]]
-
-
-class Fault(str, Enum):
-    EGO = "ego"
-    OTHER = "other"
-    UNCLEAR = "unclear"
-
-
-#: The rules, by the name a verdict records (``Attribution.rule``), with what each says happened. Findings
-#: of one oracle and kind that one rule blamed on the ego are likely one bug of the ADS, however their
-#: signatures differ (a roundabout entry not yielded to, with the ego going straight or right, the other car
-#: an autopilot or a linear one, struck front or side): the report and the summaries group them so.
-RULES: dict[str, str] = {
-    # the ego's fault
-    "own_driving": "its own driving",
-    "obstacle": "it drove into a static obstacle",
-    "lane_change_into": "it moved sideways into a vehicle alongside",
-    "ran_red": "it entered a junction on red and hit someone",
-    "failed_to_yield": "it did not yield where its link must yield",
-    "struck": "it struck another road user",
-    "slow": "it did not reach its goal in time",
-    "no_blocker": "it stood still with nothing in its way",
-    "stayed_behind": "it stayed behind a stationary body with a lane free",
-    "stood_still": "it stood still with a lane free",
-    "stood_in_lane": "it stood reaching into another's lane, in its way",
-    # an excuse that the careful driver's replay overturned (:data:`AVOIDED`): the ego's
-    "stopped_in_the_way": "it stopped where a careful driver did not, and was struck there",
-    "rear_end_avoidable": "it was struck from behind where a careful driver was not",
-    "cut_in_avoidable": "a vehicle cut in that a careful driver kept clear of",
-    "right_of_way_avoidable": "another did not give way, and a careful driver kept clear of it",
-    "pedestrian_avoidable": "it met a pedestrian that a careful driver kept clear of",
-    "blocked_avoidable": "it stood blocked or held up where a careful driver got on",
-    # another's
-    "stationary_struck": "it was struck while standing still",
-    "rear_ended": "it was struck from behind while driving lawfully",
-    "cut_in": "a vehicle cut in closer than a careful driver can brake for",
-    "other_ran_red": "another vehicle entered the junction on red",
-    "other_failed_to_yield": "another vehicle did not yield",
-    "pedestrian": "a pedestrian stepped out too close, unseen, or into its side",
-    "held_up": "slower traffic held it up",
-    "pedestrian_in_lane": "a pedestrian stood in its lane",
-    "blocked": "every lawful way on was blocked",
-    "queue": "it waited in a queue that will move",
-    # neither
-    "no_evidence": "the trace lacks the evidence",
-}
-
-
-#: The rules that excuse the ego (``other``), each a hypothesis that the careful driver's replay tests, with the
-#: rule an ``ego`` verdict names when the careful driver avoided what the rule excused.
-AVOIDED: dict[str, str] = {
-    "stationary_struck": "stopped_in_the_way",
-    "rear_ended": "rear_end_avoidable",
-    "cut_in": "cut_in_avoidable",
-    "other_ran_red": "right_of_way_avoidable",
-    "other_failed_to_yield": "right_of_way_avoidable",
-    "pedestrian": "pedestrian_avoidable",
-    "pedestrian_in_lane": "blocked_avoidable",
-    "blocked": "blocked_avoidable",
-    "queue": "blocked_avoidable",
-    "held_up": "blocked_avoidable",
-}
-#: [m] centre to centre: a careful driver whose replay never came this close to the other party, and was farther
-#: than this from the event's place at its time, never met it (it came by earlier or later): its keeping clear
-#: says nothing about the ego's excuse.
-MET_M = 15.0
-#: [s] before its closest approach to the other party over which the careful driver's slowing down counts.
-REACT_WINDOW = 3.0
-#: Excuses about another vehicle's conduct at a junction or from behind: the careful driver avoided it only if it
-#: slowed for the vehicle (:func:`_reacted`); one that came by at its cruising speed was elsewhere when the other
-#: came, by timing. (A cut-in is not among them: the careful driver's longer headway is the care that avoids it.)
-VEHICLE_EXCUSES = frozenset({"other_ran_red", "other_failed_to_yield", "rear_ended"})
-#: The oracles of a standstill: an excuse of one (blocked, held up) holds when the careful driver fails either.
-STANDSTILL = frozenset({"immobility", "mission"})
-#: Evidence key of an excuse that holds without a replay (its value says why).
-KEPT = "kept_without_replay"
-
-
-def needs_replay(att: "Attribution") -> bool:
-    """Whether ``att`` (a verdict from the rules alone) is an excuse that the careful driver's replay must test
-    before it holds: the triage runs the replay for these as for the ego's verdicts."""
-    return att.fault is Fault.OTHER and att.rule in AVOIDED and KEPT not in att.evidence
-
-
-def bug_class(verdict: str, fault: str, rule: str) -> tuple[str, str]:
-    """(key, title) of the likely bug behind a finding: its oracle/kind (``verdict``), fault and rule. A verdict
-    that names no rule (one filed before verdicts recorded theirs) is a class of its oracle and kind alone."""
-    what = RULES.get(rule)
-    tail = "" if fault == Fault.EGO.value else f" (fault: {fault})"  # an unclear finding is not the ego's yet
-    if what is None:
-        return f"{verdict}|{fault}", verdict + tail
-    return f"{verdict}|{fault}|{rule}", f"{verdict}: {what}{tail}"
-
-
-@dataclass(frozen=True)
-class Attribution:
-    """A verdict, the one-line reason a reader can check, its evidence (JSON-safe), and the name of the rule
-    that gave it (a key of :data:`RULES`; the counterfactual keeps the rule whose verdict it tested)."""
-
-    fault: Fault
-    reason: str
-    evidence: Mapping[str, Any] = field(default_factory=dict)
-    rule: str = ""
-
-    def __post_init__(self):
-        if self.rule and self.rule not in RULES:
-            raise ValueError(f"attribution rule {self.rule!r} is not described in RULES")
-
-    def as_dict(self) -> dict[str, Any]:
-        return {"fault": self.fault.value, "reason": self.reason, "rule": self.rule,
-                "evidence": _json_safe(self.evidence)}
-
-
-def _json_safe(v):
-    if isinstance(v, Mapping):
-        return {str(k): _json_safe(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_json_safe(x) for x in v]
-    if isinstance(v, (np.floating, float)):
-        return None if not math.isfinite(float(v)) else round(float(v), 3)
-    if isinstance(v, np.integer):
-        return int(v)
-    if isinstance(v, (np.bool_,)):
-        return bool(v)
-    if isinstance(v, Enum):
-        return v.value
-    return v
-
 
 # ---------------------------------------------------------------------- entry point
 def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = None) -> Attribution:
@@ -338,12 +201,6 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
     return verdict
 
 
-def _were_free(lanes: list[str]) -> str:
-    """'A was free', 'A and B were free', 'A, B and C were free'."""
-    if len(lanes) < 2:
-        return f"{''.join(lanes)} was free"
-    return f"{', '.join(lanes[:-1])} and {lanes[-1]} were free"
-
 
 def _slippery(trace, f: int, window_s: float = 6.0) -> str | None:
     """Friction under an axle below 0.5 in the ``window_s`` seconds before ``f`` (a car that slid on ice may
@@ -387,135 +244,7 @@ def _windy(scenario) -> str | None:
     return f"a crosswind of {wind:.1f} m/s" if wind >= WINDY else None
 
 
-def _reached(trace, position, radius: float = REACHED_M) -> bool:
-    """Whether the replay's ego came within ``radius`` [m] of the event's ``position`` (True when the trace
-    does not say: a stand-in without the ego's channels)."""
-    ego = getattr(trace, "ego", None)
-    if ego is None or "x" not in ego or len(ego["x"]) == 0:
-        return True
-    d2 = (np.asarray(ego["x"]) - position[0]) ** 2 + (np.asarray(ego["y"]) - position[1]) ** 2
-    return bool(np.nanmin(d2) <= radius * radius)
-
-
-def careful_scenario(scenario):
-    """``scenario`` driven by the careful driver, told of its puddles (their friction is map knowledge: the
-    benchmark of what could have been done; the option's format is ``ego.careful.puddle_option``'s)."""
-    options = {}
-    if scenario.puddles:
-        fields = ((p.x, p.y, p.length, p.width, p.rotation, p.friction) for p in scenario.puddles)
-        options["puddles"] = ";".join(",".join(f"{v:.6g}" for v in f) for f in fields)
-    return scenario.model_copy(update={"ads": AdsSpec(name=CAREFUL_ADS, options=options)})
-
-
-def _careful_replay(scenario, misbehavior, replay: Replay, verdict: Attribution, same_failure, **record):
-    """The careful driver's replay of ``scenario``: (its misbehaviours, its trace, those that are the same failure
-    as ``misbehavior`` by ``same_failure``, the verdict's evidence with the replay's record, and why the replay says
-    nothing about the event, or None: it failed first, did not run, or never came near the place)."""
-    others, ctrace = replay(careful_scenario(scenario))
-    same = [m for m in others if same_failure(m)]
-    evidence = dict(verdict.evidence)
-    evidence["counterfactual"] = {"ads": CAREFUL_ADS, "misbehaviors": [f"{m.oracle}/{m.kind}" for m in others],
-                                  "same_failure": bool(same), **record}
-    earlier = [m for m in others if m.time <= misbehavior.time]
-    silent = None
-    if ctrace is None or earlier or not _reached(ctrace, misbehavior.position):
-        silent = (f"it failed first: {earlier[0].oracle}/{earlier[0].kind} at {earlier[0].time:.1f} s" if earlier else
-                  "it did not run" if ctrace is None else "it never came near the place")
-    return others, ctrace, same, evidence, silent
-
-
-def _same_oracle_and_party(misbehavior):
-    return lambda m: m.oracle == misbehavior.oracle and set(m.actors) == set(misbehavior.actors)
-
-
-def counterfactual(scenario, misbehavior, replay: Replay, verdict: Attribution) -> Attribution:
-    """Drive ``scenario`` with the careful driver; the same failure makes the verdict ``other``."""
-    _others, _trace, same, evidence, silent = _careful_replay(scenario, misbehavior, replay, verdict,
-                                                             _same_oracle_and_party(misbehavior))
-    if same:
-        m = same[0]
-        return Attribution(Fault.OTHER, f"a careful driver could not avoid it either ({m.oracle}/{m.kind} "
-                                        f"at {m.time:.1f} s)", evidence, verdict.rule)
-    if silent is not None:  # it never got there: the replay says nothing about this event
-        return Attribution(Fault.UNCLEAR, verdict.reason + f"; the careful driver's replay failed first "
-                           f"({silent.removeprefix('it failed first: ').removeprefix('it ')})", evidence, verdict.rule)
-    return Attribution(verdict.fault, verdict.reason + "; a careful driver avoided it", evidence, verdict.rule)
-
-
-def test_excuse(scenario, trace, misbehavior, replay: Replay, verdict: Attribution) -> Attribution:
-    """Drive ``scenario`` with the careful driver to test the excuse ``verdict`` (``other``, a rule of
-    :data:`AVOIDED`): it holds if the careful driver fails the same way (same oracle, same other party), or if the
-    replay says nothing (it failed first, never came near the place, or did not run); otherwise the verdict is
-    the ego's, and its reason says what the careful driver did instead."""
-    stuck = misbehavior.oracle in STANDSTILL  # held up or blocked: standing still and timing out are one failure
-    same_failure = (lambda m: m.oracle in STANDSTILL) if stuck else _same_oracle_and_party(misbehavior)
-    _others, ctrace, same, evidence, silent = _careful_replay(scenario, misbehavior, replay, verdict, same_failure,
-                                                              excuse=verdict.rule)
-    if same:
-        m = same[0]
-        return Attribution(Fault.OTHER, f"{verdict.reason}; a careful driver could not avoid it either ({m.oracle}/"
-                                        f"{m.kind} at {m.time:.1f} s)", evidence, verdict.rule)
-    if silent is not None:
-        return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing ({silent})",
-                           evidence, verdict.rule)
-    instead = _what_careful_did(ctrace, trace, misbehavior)
-    evidence["counterfactual"].update(instead[1])
-    if stuck and instead[1]["careful_distance_to_place"] <= REACHED_M and instead[1]["careful_speed_then"] <= 0.5:
-        # no oracle fired on the replay, but it stood at the same place at the event's time: it was held the same
-        return Attribution(Fault.OTHER, f"{verdict.reason}; a careful driver stood there too at "
-                                        f"{misbehavior.time:.1f} s", evidence, verdict.rule)
-    closest = instead[1].get("careful_closest")
-    far = instead[1]["careful_distance_to_place"] > MET_M
-    if closest is not None and closest > MET_M and far:  # it never met the other party: timing, not care
-        return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing (it never met "
-                                        f"{misbehavior.actors[0]}: {closest:.0f} m at the closest)", evidence,
-                           verdict.rule)
-    if closest is not None and verdict.rule in VEHICLE_EXCUSES and not _reacted(instead[1]):
-        # it passed the other vehicle without slowing for it: it came by at another time, which is no care
-        return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing (it passed "
-                                        f"{misbehavior.actors[0]} without slowing for it)", evidence, verdict.rule)
-    return Attribution(Fault.EGO, f"{verdict.reason}, but the careful driver's replay avoided it: {instead[0]}",
-                       evidence, AVOIDED[verdict.rule])
-
-
-def _reacted(ev: Mapping[str, Any]) -> bool:
-    """Whether the careful driver slowed for the other party: at its closest approach it drove below 70 % of its
-    fastest in the :data:`REACT_WINDOW` before, or below 1 m/s."""
-    return ev["careful_speed_closest"] < max(0.7 * ev["careful_speed_before"], 1.0)
-
-
-def _what_careful_did(ctrace, trace, mb) -> tuple[str, dict[str, Any]]:
-    """What the careful driver's replay ``ctrace`` did about the event ``mb`` of ``trace``, in words, and as
-    evidence: how close it came to the other party, and where it was (and how fast) at the event's time."""
-    t_event = float(mb.time)
-    tc = np.asarray(ctrace["t"], dtype=float)
-    k = int(np.clip(np.searchsorted(tc, t_event), 0, len(tc) - 1))
-    x, y, v = np.asarray(ctrace["x"], float), np.asarray(ctrace["y"], float), np.asarray(ctrace["speed"], float)
-    px, py = mb.position
-    at = float(math.hypot(x[k] - px, y[k] - py))
-    ev: dict[str, Any] = {"careful_distance_to_place": round(at, 2), "careful_speed_then": round(float(v[k]), 2)}
-    where = (f"at {t_event:.1f} s it was {at:.1f} m from the place at {float(v[k]):.1f} m/s" if at > 1.0 else
-             f"at {t_event:.1f} s it was at the place at {float(v[k]):.1f} m/s")
-    who = mb.actors[0] if mb.actors else None
-    tr = actor_track(ctrace, who) if who is not None else None
-    if tr is not None:
-        d = np.hypot(tr.x - x, tr.y - y)
-        if np.any(~np.isnan(d)):
-            j = int(np.nanargmin(d))
-            gap = float(d[j]) - 0.5 * (float(tr.length) + EGO_LENGTH) if tr.kind == "vehicle" else \
-                float(d[j]) - 0.5 * EGO_LENGTH
-            before = v[max(j - int(REACT_WINDOW / max(float(tc[1] - tc[0]), 1e-3)) if len(tc) > 1 else j, 0):j + 1]
-            ev.update(careful_closest=round(float(d[j]), 2), careful_speed_closest=round(float(v[j]), 2),
-                      careful_speed_before=round(float(np.nanmax(before)), 2))
-            how = "stood" if v[j] <= STATIONARY_SPEED else f"drove at {float(v[j]):.1f} m/s"
-            return (f"it came no closer to {who} than {float(d[j]):.1f} m centre to centre (about "
-                    f"{max(gap, 0.0):.1f} m clear; it {how} then), and {where}", ev)
-    if mb.oracle in ("immobility", "mission"):
-        return f"it got on ({where})", ev
-    return where, ev
-
-
-class _Event:
+class _Event(StandstillRules):
     """One misbehaviour with what the rules need; :meth:`judge` applies them."""
 
     def __init__(self, scenario, trace, mb, rmap, f: int):
@@ -829,98 +558,3 @@ class _Event:
                               f"stopping needed {need:.1f} m (mu {mu:.2f})", **ev)
         self.base.update(ev)
         return None
-
-    # ------------------------------------------------------------------ standstills
-    def _leads(self) -> set[str] | None:
-        """The lanes of the ego's edge that connect to its route's next edge; None when any lane will do
-        (the goal edge, off the route, or in a junction)."""
-        m = self.scenario.mission
-        route = self.rmap.route(m.start_edge, m.goal_edge) or ()
-        lane = str(self.trace["lane"][self.f])
-        if not lane or lane.startswith(":") or not self.rmap.has_lane(lane):
-            return None
-        edge = self.rmap.lane(lane).getEdge().getID()
-        if edge not in route or route.index(edge) + 1 >= len(route):
-            return None
-        return {fl for fl, _tl, _via in self.rmap.connections(edge, route[route.index(edge) + 1])}
-
-    def _leading_on(self, free: list[str], blocked: Mapping[str, str], leads: set[str] | None) -> list[str]:
-        """The free lanes that are a way forward along the route: a lane that connects to the route's next
-        edge, or one the ego can pass the blocker on and still merge back (:data:`MERGE_ROOM` before the
-        end of a blocked lane that connects); ``leads``: :meth:`_leads`."""
-        if leads is None:
-            return free
-        out = [l for l in free if l in leads]
-        if out or not free:
-            return out
-        for l, body in blocked.items():  # pass on a free lane, merge back into a blocked one that leads on
-            if l in leads and self._room_after(l, body) >= MERGE_ROOM:
-                return free
-        return []
-
-    def _room_to_pass(self, lanes: Mapping[str, str], leads: set[str] | None) -> list[str]:
-        """The blocked lanes that do not block the way: a neighbour of a lane that leads on, whose
-        stationary body stands at least :data:`MERGE_ROOM` (bumper to bumper) beyond that lane's blocker,
-        which has the same room after it. The ego can pass the blocker there and merge back in front of it."""
-        out = set()
-        for l, body in lanes.items():
-            if (leads is not None and l not in leads) or self._room_after(l, body) < MERGE_ROOM:
-                continue
-            end = self._along(l, body) + actor_track(self.trace, body).length / 2
-            for n, other in lanes.items():
-                if n != l and self._along(n, other) - actor_track(self.trace, other).length / 2 - end >= MERGE_ROOM:
-                    out.add(n)
-        return sorted(out)
-
-    def _along(self, lane: str, body: str) -> float:
-        """[m] of ``body``'s centre along ``lane`` at the event."""
-        tr = actor_track(self.trace, body)
-        return self.rmap.geom(lane).project(float(tr.x[self.f]), float(tr.y[self.f]))[0]
-
-    def _room_after(self, lane: str, body: str) -> float:
-        """[m] of ``lane`` left beyond ``body``'s centre."""
-        return self.rmap.geom(lane).length - self._along(lane, body)
-
-    def standstill(self) -> Attribution:
-        trace, f = self.trace, self.f
-        if self.v > 0.5:
-            held = held_up(trace, f)
-            if self.mb.kind == "timeout" and held is not None:
-                share, leader = held
-                return self.other("held_up", f"held up behind slower traffic ({leader}) for {share:.0%} of the run",
-                                  held_share=share, leader=leader,
-                                  **{KEPT: "a leader it cannot pass holds up any driver behind it alike"})
-            # a moving ego, not held up: fog, rain and ice slow a careful driver too, and a time limit too
-            # short for the route holds for everyone, which its replay shows
-            self.replay_may_settle = self.mb.kind == "timeout"
-            return self.ego("slow", f"the ego did not reach its goal in time ({self.mb.oracle}/{self.mb.kind})")
-        blocked = blocked_lanes(trace, self.rmap, f)
-        if blocked is None:
-            self.replay_may_settle = True  # the rules may have missed a blocker (mid-turn in a junction)
-            return self.ego("no_blocker", f"the ego stood still with nothing blocking its way ({self.mb.oracle}/{self.mb.kind})")
-        lanes, free, queue, root = blocked
-        leads = self._leads()
-        passable = self._room_to_pass(lanes, leads)
-        lanes = {l: b for l, b in lanes.items() if l not in passable}
-        free = self._leading_on(free + passable, lanes, leads)
-        ev = {"lanes": {l: b for l, b in lanes.items()}, "free_lanes": free}
-        own = lanes.get(str(trace["lane"][f]))
-        if own is not None and actor_track(trace, own).kind == "pedestrian":
-            return self.other("pedestrian_in_lane", f"the pedestrian {own} stands in the ego's path", **ev)
-        if not free and lanes:
-            what = ", ".join(f"{l} by {b}" for l, b in lanes.items())
-            return self.other("blocked", f"every lawful way forward is blocked by stationary bodies: {what}", **ev)
-        if queue is not None and (leads is None or str(trace["lane"][f]) in leads):  # a queue on the way on
-            return self.other("queue", f"the ego waits in a queue that will move: {queue}", queue=queue, **ev)
-        behind = own or next(iter(lanes.values()), None)  # mid-lane-change: the blocker of the lane it wants
-        were_free = _were_free(free)
-        if behind is not None:
-            if root is not None and own is not None:  # a queue that will not move: the blocker is its head
-                how = "parked" if never_moved(actor_track(trace, root), f) else "stalled"
-                ev["blocker"] = root
-                return self.ego("stayed_behind", f"the ego stayed behind the stationary {behind} in a queue that the {how} {root} "
-                                f"holds up, although {were_free}", decided=True, **ev)
-            return self.ego("stayed_behind", f"the ego stayed behind the stationary {behind} although {were_free}",
-                            decided=True, **ev)
-        return self.ego("stood_still", f"the ego stood still although {were_free}", decided=True, **ev)
-
