@@ -80,39 +80,61 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def cases(root: Path) -> int:
-    """Run and judge each scenario folder under ``root`` in the old order and the current one."""
+def both_orders(sc, trace, m, rmap, replay):
+    """(old, new): the verdict on ``m`` in the order before issue 31 (an excusing rule decides ``other`` before any
+    replay) and in the current one (the excuse is a hypothesis that ``replay``, the careful driver's, tests)."""
+    from drivefuzz.triage.attribute import Fault, attribute
+
+    rules = attribute(sc, trace, m, rmap)
+    new = attribute(sc, trace, m, rmap, replay=replay)
+    return (rules if rules.fault is Fault.OTHER else new), new
+
+
+def careful_replay(sc):
+    """The careful driver's replay as the fuzz loop's triage runs it by default: every oracle, default settings."""
+    from drivefuzz.oracle import OracleSettings
+    from drivefuzz.sim.execute import execute
+
+    ex = execute(sc, oracles=OracleSettings().instantiate())
+    return ex.misbehaviors, ex.trace
+
+
+def judge_case(case: Path, workdir: Path):
+    """Run the scenario folder ``case`` (copied into ``workdir``, with its network: the folder's own, else the one
+    of that name in networks/) with every oracle; (first misbehaviour, old verdict, new verdict, scenario,
+    execution) by :func:`both_orders`, or (None, None, None, scenario, execution) when nothing misbehaved."""
     import shutil
-    import tempfile
 
     from drivefuzz.oracle import OracleSettings
     from drivefuzz.scenario.roadmap import load_roadmap
     from drivefuzz.scenario.sumofiles import load_scenario
     from drivefuzz.sim.execute import execute
-    from drivefuzz.triage.attribute import Fault, attribute
 
-    def careful(sc):
-        ex = execute(sc, oracles=OracleSettings().instantiate())
-        return ex.misbehaviors, ex.trace
+    net = json.loads((case / "scenario.json").read_text())["network"]
+    folder = workdir / case.name
+    shutil.copytree(case, folder)
+    if not (folder / Path(net).name).exists():
+        shutil.copy(REPO / "networks" / Path(net).name, folder / Path(net).name)
+    sc = load_scenario(folder)
+    ex = execute(sc, oracles=OracleSettings().instantiate())
+    if not ex.misbehaviors:
+        return None, None, None, sc, ex
+    m = ex.misbehaviors[0]
+    old, new = both_orders(sc, ex.trace, m, load_roadmap(sc.network_path()), careful_replay)
+    return m, old, new, sc, ex
+
+
+def cases(root: Path) -> int:
+    """Run and judge each scenario folder under ``root`` in the old order and the current one."""
+    import tempfile
 
     total = changed = 0
     for d in sorted(p for p in root.iterdir() if (p / "scenario.json").exists()):
-        net = json.loads((d / "scenario.json").read_text())["network"]
         with tempfile.TemporaryDirectory() as tmp:
-            folder = Path(tmp) / d.name
-            shutil.copytree(d, folder)
-            if not (folder / Path(net).name).exists():
-                shutil.copy(REPO / "networks" / Path(net).name, folder / Path(net).name)
-            sc = load_scenario(folder)
-            ex = execute(sc, oracles=OracleSettings().instantiate())
-            if not ex.misbehaviors:
-                print(f"{d.name}: no misbehaviour")
-                continue
-            m = ex.misbehaviors[0]
-            rmap = load_roadmap(sc.network_path())
-            rules = attribute(sc, ex.trace, m, rmap)
-            new = attribute(sc, ex.trace, m, rmap, replay=careful)
-            old = rules if rules.fault is Fault.OTHER else new  # before: an excuse decided without a replay
+            m, old, new, _sc, _ex = judge_case(d, Path(tmp))
+        if m is None:
+            print(f"{d.name}: no misbehaviour")
+            continue
         total += 1
         if (old.fault, old.rule) == (new.fault, new.rule):
             print(f"{d.name}: {m.oracle}/{m.kind} {new.fault.value} ({new.rule}), unchanged")
