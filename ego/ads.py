@@ -19,6 +19,16 @@ Options (``--ads-option K=V``):
   :data:`SHORT_HEADWAY_GAP` m at a standstill, blind to how fast it closes in: a leader that brakes hard is
   struck), ``narrow_corridor`` (a vehicle counts only with its centre within :data:`NARROW_CORRIDOR_M` m plus
   half its width of the path: a car cutting or nosing in is seen late).
+  Three that bite in one kind of encounter each (issue 33, for ``tools/eval_coverage.py --faults``):
+  ``right_walker_blind`` (a walker right of the car that walks leftwards, across its path from the right, is
+  not an obstacle until it has crossed the car's centre line), ``crossing_left_blind`` (a moving vehicle heading
+  45-135 degrees to the car's right, crossing its path from the left, is not an obstacle) and
+  ``low_sun_blind`` (with the sun low ahead, the camera is dazzled: obstacles farther than
+  :data:`GLARE_BLIND_M` m along the path are not seen). Two more were tried and dropped, no situation the
+  fuzzer built made them collide where the clean ADS did not: ``left_turn_oncoming`` (blind to oncoming
+  vehicles in a left turn: the oncoming SUMO drivers yield) and ``crossing_right_blind`` (the mirror of
+  ``crossing_left_blind``: the only unsignalised junction with traffic from the right, town's B0, makes
+  the clean ADS collide too).
 - ``speed_margin``: fraction of the speed limit it aims for (default 0.95).
 - ``max_lat_accel``: comfort limit in curves [m/s^2].
 - ``sensor_range``: clear-weather sensor range [m].
@@ -51,7 +61,10 @@ from ego.planning import (CELL, assured_clear_speed, build_path, idm_accel, lawf
 from ego.sensing import Sensors, SensorSpec
 
 FAULTS = ("none", "speeding", "no_traffic_lights", "no_control", "steer_left", "ignore_pedestrians", "late_braking",
-          "no_fog_slowdown", "no_walker_prediction", "short_headway", "narrow_corridor")
+          "no_fog_slowdown", "no_walker_prediction", "short_headway", "narrow_corridor", "right_walker_blind",
+          "crossing_left_blind", "low_sun_blind")
+#: [m] the ``low_sun_blind`` fault sees obstacles only this far ahead (along the path) under sun glare
+GLARE_BLIND_M = 8.0
 #: [m] the ``late_braking`` fault sees obstacles only this close (front bumper to their centre, along the path).
 LATE_BRAKING_M = 4.0
 #: [s], [m] the ``short_headway`` fault's time gap and standstill gap to vehicles (the IDM's T and s0).
@@ -91,7 +104,8 @@ class ReferenceADS(ADS):
     class Options(ADS.Options):
         fault: Literal["none", "speeding", "no_traffic_lights", "no_control", "steer_left", "ignore_pedestrians",
                        "late_braking", "no_fog_slowdown", "no_walker_prediction", "short_headway",
-                       "narrow_corridor"] = "none"
+                       "narrow_corridor", "right_walker_blind", "crossing_left_blind",
+                       "low_sun_blind"] = "none"
         speed_margin: float = 0.95
         max_lat_accel: float = 2.5
         sensor_range: float = 100.0
@@ -140,7 +154,7 @@ class ReferenceADS(ADS):
         accel = max(idm_accel(v, v0, math.inf, 0.0), -FREE_DECEL)
         accel = min(accel, max(profile_accel(self._profile, self.path, self.path_idx, v,
                                              max(v * PROFILE_LEAD_S, PROFILE_MIN_M)), -FREE_DECEL))
-        accel = min(accel, self._obstacle_accel(world, ego, s_c, lat_c, v0))
+        accel = min(accel, self._obstacle_accel(world, ego, s_c, lat_c, v0, obs.sun_glare))
         accel = min(accel, self._light_accel(world, v))
 
         # goal: stop with the centre on the goal point
@@ -179,7 +193,7 @@ class ReferenceADS(ADS):
             return v0
         return min(v0, max(assured_clear_speed(clear, decel, ACDA_REACTION), 1.0))
 
-    def _obstacle_accel(self, world, ego, s_c: float, lat_c: float, v0: float) -> float:
+    def _obstacle_accel(self, world, ego, s_c: float, lat_c: float, v0: float, glare: bool = False) -> float:
         """Acceleration [m/s^2] the obstacles in the path allow (+inf: none): leaders and
         pedestrians (pedestrians also predicted 1.5 s ahead). An object in the corridor (at most
         ~4 m to the side) is within a grid cell of the path, and at most ~90 m (plus the car's own
@@ -198,9 +212,15 @@ class ReferenceADS(ADS):
         ped_horizons, ped_side = ((0.0,), 0.0) if fault == "no_walker_prediction" else ((0.0, 1.5), 0.8)
         veh_side = NARROW_CORRIDOR_M - 1.3 if fault == "narrow_corridor" else 0.0
         headway = fault == "short_headway"
+        blind = _BLIND.get(fault)
+        if blind == "far" and not glare:  # the low_sun_blind fault: only under glare
+            blind = None
+        ch, sh = (math.cos(ego.heading), math.sin(ego.heading)) if blind else (1.0, 0.0)
         for tr in world.tracks:
             ped = tr[PED]
             if ped and fault == "ignore_pedestrians":
+                continue
+            if blind and blind != "far" and _unseen(blind, tr, ex, ey, ch, sh, ego.heading):
                 continue
             corridor = 1.3 + tr[WIDTH] / 2 + (ped_side if ped else veh_side)
             for horizon in ped_horizons if ped else (0.0,):
@@ -220,6 +240,8 @@ class ReferenceADS(ADS):
                     continue
                 if fault == "late_braking" and ahead - half > LATE_BRAKING_M:
                     continue
+                if blind == "far" and ahead - half > GLARE_BLIND_M:
+                    continue
                 gap = ahead - half - tr[LENGTH] / 2
                 dv = v - tr[SPEED] * max(math.cos(tr[HEADING] - ego.heading), 0.0)
                 if headway and not ped:  # and blind to the closing speed: it reads the leader's speed as its own
@@ -237,3 +259,22 @@ class ReferenceADS(ADS):
         if world.tl_state in "yY" and dist < v * v / (2 * 4.0):
             return math.inf  # too close to stop comfortably on yellow: go
         return stop_accel(v, dist)
+
+
+#: the encounter each single-encounter fault drops
+_BLIND = {"right_walker_blind": "right_walker", "crossing_left_blind": "crossing_left",
+          "low_sun_blind": "far"}
+
+def _unseen(blind: str, tr, ex: float, ey: float, ch: float, sh: float, heading: float) -> bool:
+    """Whether track ``tr`` falls in the ``blind`` encounter (ego at (ex, ey), heading cos/sin ``ch``/``sh``)."""
+    ped = tr[PED]
+    if blind == "right_walker":
+        if not ped:
+            return False
+        lat = -(tr[X] - ex) * sh + (tr[Y] - ey) * ch  # [m] left of the car
+        v_lat = tr[SPEED] * math.sin(tr[HEADING] - heading)  # [m/s] leftwards
+        return lat < 0.0 and v_lat > 0.2
+    if ped or tr[SPEED] < 0.5:
+        return False
+    dh = math.remainder(tr[HEADING] - heading, math.tau)
+    return -3 * math.pi / 4 < dh < -math.pi / 4  # crossing_left: it heads to the car's right

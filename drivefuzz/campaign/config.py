@@ -14,8 +14,9 @@ from drivefuzz.search.schedule import ScheduleConfig
 
 #: A campaign directory's marker that a run ended by spending its budget (a batch does not run it again).
 FINISHED = "finished.json"
-#: How successors are chosen: the risk score (default), the paper's driving-quality score, or at random.
-FEEDBACKS = ("risk", "paper", "random")
+#: How successors are chosen: the risk score (default), the paper's driving-quality score, or at random;
+#: ``coverage`` and ``product`` weigh the interaction-coverage cells differently (drivefuzz.search.schedule).
+FEEDBACKS = ("risk", "paper", "random", "coverage", "product")
 
 
 @dataclass

@@ -63,12 +63,15 @@ import drivefuzz
 from drivefuzz.campaign.config import FuzzConfig
 from drivefuzz.oracle import Misbehavior
 from drivefuzz.storage import atomic_write_json, atomic_write_text
+from drivefuzz.search.effect import effect_hash
+from drivefuzz.search.schedule import GUIDED
 from drivefuzz.triage.store import FindingStore, TriageConfig
 from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
 
 STOP_FILE = "STOP"
-#: Draws of a population member that repeats its parent or a sibling before it is kept anyway.
-MAX_REDRAWS = 4
+#: Draws of a population member that repeats (in effect) an execution of its job, its parent or a sibling
+#: before the member is skipped (it is not run: a repeat would only cost the time of an execution).
+MAX_REDRAWS = 8
 
 
 def job_dir(out: Path, seed_index: int) -> Path:
@@ -242,7 +245,7 @@ class SeedJob:
                              {"oracles": cfg.oracles.settings, "exec_timeout_s": cfg.exec_timeout_s})
 
         def execute(key: str, scenario, parent, description: str, retries: int, t_mutate: float,
-                    lineage: int, cycle: int, member: int, baseline) -> dict[str, Any] | str:
+                    lineage: int, cycle: int, member: int, baseline, extra: dict | None = None) -> dict[str, Any] | str:
             """The record of one execution (from the journal if it ran before), or why it did not run."""
             if key in done:  # finished before a stop or a kill: reuse its result
                 return done[key]
@@ -255,7 +258,7 @@ class SeedJob:
             rec = {"event": "end", "key": key, "seed_index": self.si, "lineage": lineage, "cycle": cycle,
                    "member": member, "hash": h, "parent": parent, "mutation": description,
                    "retries": retries, "finding": None, "score": None, "risk": None, "hint": None,
-                   "components": {}, "verdict": "pass", "pid": os.getpid()}
+                   "components": {}, "verdict": "pass", "pid": os.getpid(), **(extra or {})}
             self._execute_into(rec, runner, store, scenario, key, t_mutate, baseline)
             _append(self.journal, rec)
             done[key] = rec
@@ -264,12 +267,17 @@ class SeedJob:
 
         # The seed's clean run: the baseline that risk is measured against (and a finding if the seed fails).
         if "baseline" not in ckpt:
-            rec = execute(f"{self.si}/seed", seed_sc, None, "the seed as it is", 0, 0.0, -1, -1, 0, None)
+            rec = execute(f"{self.si}/seed", seed_sc, None, "the seed as it is", 0, 0.0, -1, -1, 0, None,
+                          {"effect": effect_hash(seed_sc)})
             if isinstance(rec, str):
                 return rec
             ckpt["baseline"] = rec.get("risk_detail")
             self._checkpoint(schedule, ckpt["baseline"])
         baseline = _baseline(ckpt["baseline"])
+        # no wasted executions: what this job has run, by effect (drivefuzz.search.effect); the journal's records
+        # come before any execution not yet run, so a resumed job avoids exactly what the first run avoided
+        executed = {r["effect"] for r in done.values() if r.get("effect")} | {effect_hash(seed_sc)}
+        reach = _seed_reachable(mutator.rmap, seed_sc) if cfg.feedback in GUIDED else ()
 
         while True:
             if schedule.lineage is None:
@@ -282,19 +290,20 @@ class SeedJob:
                 update={"ads": cfg.ads})
             parent_hash = parent.content_hash()
             members: list[tuple[dict[str, Any], Any]] = []
-            seen = {parent_hash}
+            seen = {effect_hash(parent)}
+            aim = [c for c in reach if c not in schedule.cells]  # the job's unreached cells (guided feedback)
             for member in range(cfg.population):
                 t0 = time.perf_counter()
-                for redraw in range(MAX_REDRAWS):  # a member that repeats the parent or a sibling is drawn again
-                    rng = random.Random(f"{cfg.seed}/{self.si}/{lin.number}/{lin.cycle}/{parent_hash}/{member}"
-                                        + (f"/{redraw}" if redraw else ""))
-                    mut = mutator.successor(parent, cfg.strategy, rng, hint=lin.hint)
-                    if (h := mut.scenario.content_hash()) not in seen:
-                        break
-                seen.add(h)
-                rec = execute(f"{self.si}/{lin.number}/{lin.cycle}/{member}", mut.scenario, parent_hash,
-                              mut.description, mut.retries, time.perf_counter() - t0, lin.number, lin.cycle, member,
-                              baseline)
+                key = f"{self.si}/{lin.number}/{lin.cycle}/{member}"
+                drawn = self._draw(mutator, parent, parent_hash, lin, member, aim, seen | executed, done.get(key))
+                if drawn is None:  # every draw repeats an execution of this job: skipped, not run
+                    _append(self.journal, {"event": "duplicate", "key": key, "pid": os.getpid()})
+                    continue
+                mut, eff, redraw = drawn
+                seen.add(eff)
+                executed.add(eff)
+                rec = execute(key, mut.scenario, parent_hash, mut.description, mut.retries, time.perf_counter() - t0,
+                              lin.number, lin.cycle, member, baseline, {"effect": eff, "redraw": redraw})
                 if isinstance(rec, str):
                     return rec
                 members.append((rec, mut.scenario))
@@ -306,17 +315,34 @@ class SeedJob:
             if schedule.lineage is None:
                 return "done" if cfg.one_lineage_per_seed else "yielded"
 
+    def _draw(self, mutator, parent, parent_hash: str, lin, member: int, aim: list[str], avoid: set[str],
+              prior: dict[str, Any] | None):
+        """(mutation, effect hash, draw number) of a population member: the first of :data:`MAX_REDRAWS` draws
+        whose effect the job has not executed (nor the parent, nor a sibling); None when every draw repeats
+        one. A member the journal has (``prior``: a resume) is drawn as it was then, without the check."""
+        cfg = self.cfg
+        draws = [int(prior["redraw"])] if prior is not None and "redraw" in prior else range(MAX_REDRAWS)
+        for redraw in draws:
+            rng = random.Random(f"{cfg.seed}/{self.si}/{lin.number}/{lin.cycle}/{parent_hash}/{member}"
+                                + (f"/{redraw}" if redraw else ""))
+            mut = mutator.successor(parent, cfg.strategy, rng, hint=lin.hint, aim=aim)
+            eff = effect_hash(mut.scenario)
+            if prior is not None or eff not in avoid:
+                return mut, eff, redraw
+        return None
+
     def _select(self, members: list[tuple[dict[str, Any], Any]], schedule, rng: random.Random):
         """(corpus folder, riskiest actor, feedback value) of the member that becomes the next scenario, or
         Nones. Findings and incidents do not become parents: the lineage goes on from a mutant that passed.
         A value is the feedback times the weight of the member's situation (behavioural coverage, see
         :mod:`drivefuzz.search.schedule`); members that met a new situation enter the corpus too."""
-        from drivefuzz.search.schedule import pick_successor
+        from drivefuzz.search.schedule import member_value, pick_successor
 
         candidates = [(rec, sc) for rec, sc in members
                       if not rec["finding"] and not rec.get("incident") and rec["risk"] is not None]
-        values = [_feedback_value(rec, self.cfg.feedback) * schedule.weight(rec.get("situation"))
-                  + schedule.cell_bonus(rec.get("cells")) for rec, _ in candidates]
+        values = [member_value(self.cfg.feedback, _feedback_value(rec, self.cfg.feedback),
+                               schedule.weight(rec.get("situation")), schedule.new_cells(rec.get("cells")),
+                               schedule.cell_bonus(rec.get("cells"))) for rec, _ in candidates]
         pick = pick_successor(values, self.cfg.feedback, rng)
         for (rec, sc), value in zip(candidates, values):
             if schedule.is_new(rec.get("situation"), rec["risk"], rec.get("cells")):
@@ -353,7 +379,7 @@ class SeedJob:
             timings["quality"] = time.perf_counter() - t0
             rec.update(score=q.score, components=q.as_dict(), risk=r.score, hint=r.riskiest_actor,
                        risk_detail=r.as_dict())
-            if self.cfg.feedback == "risk" and r.frame is not None and r.riskiest_actor is not None:
+            if self.cfg.feedback in GUIDED and r.frame is not None and r.riskiest_actor is not None:
                 rec["situation"] = situation(scenario, ex.trace, store.rmap, r.frame, r.riskiest_actor)
             rec["cells"] = execution_cells(scenario, ex.trace, store.rmap, r)  # interaction coverage
             t_store = time.perf_counter()
@@ -382,6 +408,19 @@ class SeedJob:
         # the work this record stands for: the execution and every triage rerun (careful driver, reproduction,
         # shrinking), in runs and in simulated seconds (tools/bench_scaling.py counts work by them)
         rec["runs"], rec["sim_s"] = runner.runs - runs0, round(runner.sim_s - sim0, 3)
+
+
+_REACH: dict[tuple, list[str]] = {}
+
+
+def _seed_reachable(rmap, seed_sc) -> list[str]:
+    """The interaction-coverage cells the seed's network and route offer (cached per process)."""
+    from drivefuzz.triage.coverage import reachable
+
+    key = (str(rmap.path), seed_sc.mission.start_lane, seed_sc.mission.start_pos, seed_sc.mission.goal_edge)
+    if key not in _REACH:
+        _REACH[key] = reachable(rmap, [seed_sc])
+    return _REACH[key]
 
 
 def _feedback_value(rec: dict[str, Any], mode: str) -> float:

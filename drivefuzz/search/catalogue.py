@@ -198,8 +198,9 @@ def pulls_out(mut, sc, rng):
     return [a], [], {}, f"{a.id} pulls out on {lane} @ {pos:.1f} m at {depart} s"
 
 
-def walker_crosses(mut, sc, rng):
-    """A pedestrian steps off the sidewalk in front of the ego, timed to meet it (a careful ego can stop)."""
+def walker_crosses(mut, sc, rng, early=(0.0, 4.0)):
+    """A pedestrian steps off the sidewalk in front of the ego, timed to meet it (a careful ego can stop): it
+    reaches the road ``early`` (a range [s]) before the ego is expected there."""
     if not mut._walkable(sc):
         return None
     d = rng.uniform(20.0, 100.0)
@@ -211,7 +212,7 @@ def walker_crosses(mut, sc, rng):
     across = mut._road_width(spot.lane) + rng.uniform(1.0, 3.0)
     to_road = mut.rmap.lane(spot.lane).getWidth() / 2 + 0.5
     t_meet = mut._ego_eta(sc, d)
-    depart = round(max(t_meet - to_road / speed - rng.uniform(0.0, 4.0), 0.0), 1)
+    depart = round(max(t_meet - to_road / speed - rng.uniform(*early), 0.0), 1)
     a = Actor(id=mut._new_id(sc, "p"), kind=ActorKind.PEDESTRIAN, nav=NavType.LINEAR, start_lane=spot.lane,
               start_pos=spot.pos, speed=speed, depart=depart,
               dest_xy=(round(spot.x - side * math.sin(spot.heading) * across, 2),
@@ -219,10 +220,13 @@ def walker_crosses(mut, sc, rng):
     return [a], [], {}, f"{a.id} crosses at {spot.lane} @ {spot.pos:.1f} m, leaving at {depart} s"
 
 
-def crossing_traffic(mut, sc, rng):
+def crossing_traffic(mut, sc, rng, keep=None):
     """A lawful vehicle on another approach to a junction of the ego's route, timed to reach the conflict
-    point with the ego: whoever must yield has to (straight crossing paths, left turn across path)."""
+    point with the ego: whoever must yield has to (straight crossing paths, left turn across path). With
+    ``keep``, only the conflicts (``Mutator._conflicts``' tuples) it accepts (:mod:`drivefuzz.search.aim`)."""
     options = mut._conflicts(sc)
+    if keep is not None:
+        options = [o for o in options if keep(o)]
     if not options:
         return None
     i, s_c, lane_id, dest, d_c, node, _, _ = rng.choice(options)

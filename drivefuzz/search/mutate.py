@@ -34,7 +34,7 @@ from __future__ import annotations
 import math
 import random
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Sequence
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
@@ -78,6 +78,8 @@ class MutationConfig(BaseModel):
                                 "instead of adding a component")
     catalogue_share: float = Field(default=0.5, ge=0.0, le=1.0, description="new components drawn from the "
                                    "situation catalogue (the rest by random placement)")
+    aim_share: float = Field(default=0.5, ge=0.0, le=1.0, description="new components aimed at an interaction-"
+                             "coverage cell the job has not reached (when the job names them: guided feedback)")
     max_pedestrian_speed: float = Field(default=6 * MPH, gt=0.0, description="[m/s]")
     max_actors: int = Field(default=12, ge=0)
     max_puddles: int = Field(default=4, ge=0)
@@ -369,12 +371,15 @@ class Mutator(RoutePlacement):
         return Mutation(sc, f"no feasible puddle after {cfg.max_retries} retries", cfg.max_retries)
 
     # -------------------------------------------------------------- successor
-    def successor(self, sc: Scenario, strategy: str, rng: random.Random, hint: str | None = None) -> Mutation:
+    def successor(self, sc: Scenario, strategy: str, rng: random.Random, hint: str | None = None,
+                  aim: Sequence[str] | None = None) -> Mutation:
         """One member of a population (the job calls this once per member, each with its own ``rng``).
 
         With ``target_share``, a targeted move of the actor that carried the most risk in ``sc``'s run
-        (``hint``; a random actor without one); otherwise a new component of its own, from the situation
-        catalogue (``catalogue_share``) or placed by the strategy, and then the weather.
+        (``hint``; a random actor without one); otherwise a new component of its own: aimed at one of the
+        interaction-coverage cells ``aim`` (the job's unreached cells, :mod:`drivefuzz.search.aim`) with
+        ``aim_share``, else from the situation catalogue (``catalogue_share``) or placed by the strategy;
+        then the weather (unless the aim set it).
         """
         if sc.actors and rng.random() < self.cfg.target_share:
             ids = [a.id for a in sc.actors]
@@ -382,6 +387,16 @@ class Mutator(RoutePlacement):
             m = self.target(sc, i, rng)
             if m.scenario is not sc:
                 return m
+        u = rng.random()  # drawn whether or not there is an aim: a job without one keeps the same streams
+        if aim and strategy in ("all", "mix") and len(sc.actors) < self.cfg.max_actors and u < self.cfg.aim_share:
+            from drivefuzz.search.aim import aimed, pick_cell
+
+            m, weather_set = aimed(self, sc, pick_cell(aim, rng), rng)
+            if m.scenario is not sc:
+                if weather_set:
+                    return m
+                w, wdesc = self._mutate_weather(m.scenario.weather, rng)
+                return Mutation(m.scenario.model_copy(update={"weather": w}), f"{m.description}; {wdesc}", m.retries)
         from drivefuzz.search.catalogue import SITUATIONS, add_situation
 
         if strategy in ("all", "mix") and rng.random() < self.cfg.catalogue_share and len(sc.actors) < self.cfg.max_actors:

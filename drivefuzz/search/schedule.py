@@ -42,6 +42,12 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field
 
 
+#: Feedbacks under which the schedule keeps situations and cells and the mutator aims at unreached cells:
+#: ``risk`` (the default: risk x situation weight + the cell bonus), ``coverage`` (the new cells first, risk
+#: breaks ties) and ``product`` (risk x situation weight x (1 + new cells)); see :func:`member_value`.
+GUIDED = ("risk", "coverage", "product")
+
+
 class ScheduleConfig(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
     max_cycles: int = Field(default=10, ge=1, description="cycles of one lineage at most")
@@ -84,7 +90,7 @@ class Lineage:
 @dataclass
 class Schedule:
     cfg: ScheduleConfig
-    mode: str = "risk"  # "risk" | "paper" | "random"
+    mode: str = "risk"  # "risk" | "coverage" | "product" | "paper" | "random"
     corpus: list[Entry] = field(default_factory=list)
     lineage: Lineage | None = None
     lineages: int = 0  # lineages started so far
@@ -111,7 +117,7 @@ class Schedule:
     # ------------------------------------------------------------ behavioural coverage
     def weight(self, situation: str | None) -> float:
         """The factor on a member's risk for meeting ``situation`` (1 in the other modes, or without one)."""
-        if self.mode != "risk" or not situation:
+        if self.mode not in GUIDED or not situation:
             return 1.0
         if situation in self.found:
             return self.cfg.found_weight
@@ -119,7 +125,7 @@ class Schedule:
 
     def new_cells(self, cells: list[str] | None) -> int:
         """How many of an execution's interaction-coverage ``cells`` the job has not reached (risk mode)."""
-        if self.mode != "risk" or not cells:
+        if self.mode not in GUIDED or not cells:
             return 0
         return sum(1 for c in cells if c not in self.cells)
 
@@ -132,7 +138,7 @@ class Schedule:
         module docstring)."""
         if self.new_cells(cells):
             return True
-        return (self.mode == "risk" and bool(situation) and situation not in self.seen
+        return (self.mode in GUIDED and bool(situation) and situation not in self.seen
                 and risk is not None and risk >= self.cfg.corpus_risk)
 
     def observe(self, situations: list[str | None], found: list[str | None],
@@ -227,3 +233,18 @@ def pick_successor(values: list[float], mode: str, rng: random.Random) -> int | 
         return None
     best = [i for i, v in enumerate(values) if v == top]
     return best[0] if len(best) == 1 else rng.choice(best)
+
+
+def member_value(mode: str, feedback: float, weight: float, new_cells: int, bonus: float) -> float:
+    """A population member's value for successor choice (higher is chosen).
+
+    ``feedback`` is its risk (or the negated driving-quality score under ``paper``), ``weight`` its
+    situation's weight, ``new_cells`` how many cells it reached that its job had not, ``bonus`` the capped
+    cell bonus. ``risk``: ``feedback x weight + bonus``; ``coverage``: ``new_cells + feedback / 1000`` (the
+    cells decide, the risk only breaks ties); ``product``: ``feedback x weight x (1 + new_cells)``; else
+    ``feedback x weight``."""
+    if mode == "coverage":
+        return new_cells + feedback / 1000.0
+    if mode == "product":
+        return feedback * weight * (1.0 + new_cells)
+    return feedback * weight + bonus

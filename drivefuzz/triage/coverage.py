@@ -259,65 +259,94 @@ def _features(rmap) -> dict[str, frozenset[str]]:
 
 
 def reachable(rmap, scenarios: Iterable) -> list[str]:
-    """The cells that the network of ``rmap`` and these seeds' routes can offer (sorted keys)."""
-    r = _route_features(rmap, scenarios)
-    vehicle = ["ahead", "behind"]
-    if r["multilane"]:
-        vehicle += ["left", "right", "rear_left", "rear_right"]
-    if r["oncoming"]:
-        vehicle.append("oncoming")
-    if r["crossing"]:
-        vehicle += ["crossing_left", "crossing_right"]
-    parties = [f"vehicle/{a}" for a in vehicle] + ["none/grip"]
-    if r["sidewalk"] or r["crossings"]:
-        parties += ["pedestrian/crossing_left", "pedestrian/crossing_right", "pedestrian/along"]
-    mans = ["cruise", "accelerate", "brake", "stop_go"] + sorted(r["turns"])
-    if r["multilane"]:
-        mans.append("lane_change")
-    elements = sorted(r["elements"])
-    if "ramp" in elements:
-        mans.append("merge")
-    if "roundabout" in elements:
-        mans.append("roundabout")
-    cells = [f"party-manoeuvre:{p}|{m}" for p in parties for m in mans]
-    for p in parties:
-        for e in elements:
-            if p.startswith("vehicle/crossing") and e in ("edge", "ramp"):
-                continue  # crossing traffic meets the ego where roads meet
-            if p == "vehicle/oncoming" and e in ("ramp", "roundabout"):
-                continue  # one-way roads
-            if p.startswith("pedestrian/") and e in ("ramp", "roundabout") and not r["sidewalk"]:
-                continue
-            cells.append(f"party-element:{p}|{e}")
+    """The cells that the network of ``rmap`` and these seeds' routes can offer (sorted keys).
+
+    Per *place* of a route (an edge, and the junction at its end with the link the route takes): its element,
+    its turn, and the parties that can meet the ego there (sides only on a multi-lane edge, oncoming only with
+    a road the other way, crossing vehicles only where a road enters that junction across, walkers only with a
+    pavement or a crossing there). A party x element or party x turn cell is offered only where one place has
+    both; the manoeuvres that happen anywhere (cruise, accelerate, brake, stop and go) take every party of the
+    route; a lane change, the parties of its multi-lane edges."""
+    places = _route_places(rmap, scenarios)
+    if not places:
+        return []
+    anywhere = set().union(*(p["parties"] for p in places))
+    pm: set[tuple[str, str]] = {(p, m) for p in anywhere for m in ("cruise", "accelerate", "brake", "stop_go")}
+    pe: set[tuple[str, str]] = set()
+    for pl in places:
+        parties = pl["parties"]
+        roadside = {p for p in parties if not p.startswith("vehicle/crossing")}  # crossing traffic meets at junctions
+        pe.update((p, "edge") for p in roadside)
+        if pl["element"]:
+            pe.update((p, e) for p in (roadside if pl["element"] == "ramp" else parties)
+                      for e in _phases(pl["element"]))
+        if pl["turn"]:
+            pm.update((p, pl["turn"]) for p in parties)
+        if pl["multilane"]:
+            pm.update((p, "lane_change") for p in roadside)
+        if pl["element"] == "ramp":
+            pm.update((p, "merge") for p in roadside)
+        if pl["element"] == "roundabout":
+            pm.update((p, "roundabout") for p in roadside)
+    cells = [f"party-manoeuvre:{p}|{m}" for p, m in pm] + [f"party-element:{p}|{e}" for p, e in pe]
+    vmax = max(pl["vmax"] for pl in places)
     bands = [name for top, name in SPEED_BANDS]
-    bands = bands[:next(i for i, (top, _) in enumerate(SPEED_BANDS) if r["vmax"] * 1.1 < top) + 1]
+    bands = bands[:next(i for i, (top, _) in enumerate(SPEED_BANDS) if vmax * 1.1 < top) + 1]
     cells += [f"speed-condition:{b}|{c}" for b in bands for c in CONDITIONS]
     return sorted(cells)
 
 
-def _route_features(rmap, scenarios: Iterable) -> dict[str, Any]:
-    """What the seeds' routes pass: elements, turns, multi-lane edges, opposite traffic, crossings, sidewalks."""
+def _phases(element: str) -> tuple[str, ...]:
+    """A signalised link offers all three phases at arrival (signal shifts are a mutation)."""
+    return ("signal/green", "signal/amber", "signal/red") if element == "signal" else (element,)
+
+
+def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
+    """Per route edge of every seed: its element at the end (``signal``, ``priority``, ``yield``; ``ramp`` or
+    ``roundabout`` for such an edge; None for a plain edge's end), its turn there, whether it is multi-lane,
+    its limit, and the parties that can meet the ego there."""
     feats = _features(rmap)
-    out: dict[str, Any] = {"elements": {"edge"}, "turns": set(), "multilane": False, "oncoming": False,
-                           "crossing": False, "sidewalk": False, "crossings": False, "vmax": 0.0}
+    out: list[dict[str, Any]] = []
+    done: set[tuple[str, str]] = set()
     for sc in scenarios:
         route = rmap.route(sc.mission.start_edge, sc.mission.goal_edge) or (sc.mission.start_edge,)
         for i, eid in enumerate(route):
+            nxt = route[i + 1] if i + 1 < len(route) else ""
+            if (eid, nxt) in done:
+                continue
+            done.add((eid, nxt))
             edge = rmap.edge(eid)
             lanes = edge.getLanes()
             drive = [ln for ln in lanes if ln.allows("passenger")]
-            out["multilane"] |= len(drive) >= 2
-            out["sidewalk"] |= any(ln.allows("pedestrian") and not ln.allows("passenger") for ln in lanes)
-            out["vmax"] = max(out["vmax"], max((ln.getSpeed() for ln in drive), default=0.0))
-            out["oncoming"] |= _has_opposite(edge)
-            if eid in feats["ring_edges"]:
-                out["elements"].add("roundabout")
-            if eid in feats["ramp_edges"]:
-                out["elements"].add("ramp")
             node = edge.getToNode()
-            out["crossings"] |= node.getID() in _crossing_nodes(rmap)
-            if i + 1 < len(route):
-                _link_features(rmap, edge, rmap.edge(route[i + 1]), node, out)
+            link: dict[str, Any] = {"elements": set(), "turns": set(), "crossing": False}
+            if nxt:
+                _link_features(rmap, edge, rmap.edge(nxt), node, link)
+            parties = {"vehicle/ahead", "vehicle/behind", "none/grip"}
+            multilane = len(drive) >= 2
+            if multilane:
+                parties |= {f"vehicle/{a}" for a in ("left", "right", "rear_left", "rear_right")}
+            if _has_opposite(edge):
+                parties.add("vehicle/oncoming")
+            if link["crossing"]:
+                parties |= {"vehicle/crossing_left", "vehicle/crossing_right"}
+            sidewalk = any(ln.allows("pedestrian") and not ln.allows("passenger") for ln in lanes)
+            if sidewalk or node.getID() in _crossing_nodes(rmap):
+                parties |= {f"pedestrian/{a}" for a in PEDESTRIAN_APPROACHES}
+            element = ("roundabout" if eid in feats["ring_edges"] else "ramp" if eid in feats["ramp_edges"] else None)
+            vmax = max((ln.getSpeed() for ln in drive), default=0.0)
+            base = {"multilane": multilane, "vmax": vmax, "parties": parties}
+            if element:  # a ring or ramp edge: its own element (and the manoeuvre it implies), no turns
+                if not sidewalk:  # nobody walks on a ring or a ramp without a pavement
+                    base["parties"] = {p for p in parties if not p.startswith("pedestrian/")}
+                out.append(dict(base, element=element, turn=None))
+                if element == "roundabout":  # on the ring every frame is the roundabout, its nodes too
+                    continue
+            controls = sorted(link["elements"]) or [None]
+            turns = sorted(link["turns"]) or [None]
+            for control in controls:
+                for turn in turns:
+                    out.append(dict(base, element=control, turn=turn))
     return out
 
 
@@ -341,7 +370,7 @@ def _link_features(rmap, edge, nxt, node, out: dict[str, Any]) -> None:
     for c in conns:
         cls = right_of_way(c)
         if cls == "traffic_light":
-            out["elements"].update(("signal/green", "signal/amber", "signal/red"))
+            out["elements"].add("signal")
         elif cls in ("priority", "yield", "stop"):
             out["elements"].add("yield" if cls == "stop" else cls)
         d = c.getDirection()

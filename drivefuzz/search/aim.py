@@ -1,0 +1,365 @@
+"""Aiming the mutator at interaction-coverage cells that a fuzz job has not reached yet.
+
+A job (:mod:`drivefuzz.campaign.job`) knows which of its seed's reachable cells
+(:func:`drivefuzz.triage.coverage.reachable`) its executions have reached. Under guided feedback it hands
+the rest to :meth:`drivefuzz.search.mutate.Mutator.successor`, which, for a share of the members that add a
+component (``MutationConfig.aim_share``), draws one unreached cell (:func:`pick_cell`: a projection first, so
+that the three grids get equal attention, then a cell) and builds what should produce it (:func:`aimed`):
+
+- **party** (the rows of party x manoeuvre and party x element): a situation of the catalogue or a maneuver
+  program that creates that party, from that side: a vehicle ahead (stopped, slower, braking, pulling out),
+  beside or in a rear quarter (riding beside, overtaking and cutting in, nudging), behind (a follower),
+  oncoming (on the road the other way, or a conflict at a junction from the opposite approach), crossing from
+  the left or the right (a conflict at a junction from that side), a walker crossing from that side, a
+  walker along the road, grip (a low-friction patch where the ego brakes or turns). A built actor is kept only
+  when it stands where the cell wants it (the side of the ego's lane, the approach of its junction);
+- **column**: a junction element or a turn (``signal/*``, ``priority``, ``yield``, ``turn_left``,
+  ``turn_right``) puts the encounter at a junction of the route with that control or turn (the conflict's
+  junction, or an actor within 50 m before it); ``signal/amber`` and ``signal/red`` also shift that light so
+  that it changes as the ego arrives; ``roundabout`` and ``ramp`` / ``merge`` put it on such an edge;
+  ``brake`` / ``stop_go`` / ``cruise`` pick the vehicle-ahead situations that make the ego do that;
+- **speed x condition**: the weather that makes the condition hold (fog, rain, wind, a low sun ahead of
+  the ego, a low-friction patch; ``clear`` clears them) and a vehicle ahead placed where the ego's expected
+  speed (the mutator's profile of the empty route) is in the band.
+
+Every actor still passes the fairness rules (:func:`drivefuzz.search.fairness.unfair`) and the separation:
+aiming changes what is drawn, never what is allowed. The cell drawn and the draws after it come from the
+member's ``rng`` and the job's unreached cells, so a job stays a pure function of its seed and results.
+Never imports libsumo.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from functools import partial
+from typing import Callable, Sequence
+
+from drivefuzz.scenario import ActorKind, NavType, Scenario
+from drivefuzz.scenario.roadmap import PASSENGER
+from drivefuzz.search import catalogue as cat
+from drivefuzz.search import programs as prog
+from drivefuzz.search.catalogue import Situation, add_situation
+from drivefuzz.search.fairness import lane_limit
+from drivefuzz.search.mutate import Mutation, Mutator
+
+#: [m] an actor this far before a junction (along the ego's route) meets the ego at it
+NEAR_JUNCTION_M = 50.0
+#: [m/s] bounds of the speed bands (drivefuzz.triage.coverage.SPEED_BANDS), by band name
+BANDS = {"0-10 km/h": (0.0, 2.8), "10-30 km/h": (2.8, 8.3), "30-60 km/h": (8.3, 16.7), "60+ km/h": (16.7, 99.0)}
+
+
+def pick_cell(unreached: Sequence[str], rng: random.Random) -> str | None:
+    """One of ``unreached`` (sorted keys): a projection drawn uniformly among those with unreached cells,
+    then one of its cells."""
+    if not unreached:
+        return None
+    by: dict[str, list[str]] = {}
+    for c in unreached:
+        by.setdefault(c.split(":", 1)[0], []).append(c)
+    proj = rng.choice(sorted(by))
+    return rng.choice(sorted(by[proj]))
+
+
+def aimed(mut: Mutator, sc: Scenario, cell: str, rng: random.Random) -> tuple[Mutation, bool]:
+    """``sc`` with a component built for ``cell``, and whether the weather was set for it (then the caller
+    leaves the weather alone); ``sc`` unchanged (said why) when the mission cannot offer it."""
+    proj, rest = cell.split(":", 1)
+    row, col = rest.split("|", 1)
+    if proj == "speed-condition":
+        return _condition(mut, sc, row, col, rng)
+    builders = _party_builders(mut, sc, row, col)
+    near = _column_filter(mut, sc, col)
+    if not builders:
+        return Mutation(sc, f"aim {rest}: nothing builds it on this mission"), False
+    situation = rng.choice(builders)
+    keep = near if situation.name not in ("crossing", "light") else None
+    m = add_situation(mut, sc, _filtered(situation, keep), rng)
+    if m.scenario is not sc and col in ("signal/amber", "signal/red"):
+        m2 = add_situation(mut, m.scenario, Situation("light", "", partial(_light_at, col=col)), rng)
+        if m2.scenario is not m.scenario:
+            m = Mutation(m2.scenario, f"{m.description}; {m2.description}", m.retries + m2.retries)
+    return Mutation(m.scenario, f"aim {rest}: {m.description}", m.retries), False
+
+
+# ------------------------------------------------------------------------------------------- the route
+def _marks(mut: Mutator, sc: Scenario) -> dict:
+    """What the ego's route offers where: per junction (distance [m] from the start to the stop line, route
+    index, control as coverage names it, turn), and the intervals [m] on ring and ramp edges. Cached."""
+    key = (sc.mission.start_edge, sc.mission.start_pos, sc.mission.goal_edge)
+    cache = mut.__dict__.setdefault("_aim_marks", {})
+    if key in cache:
+        return cache[key]
+    from drivefuzz.triage.coverage import _features
+    from drivefuzz.triage.signature import right_of_way
+
+    feats = _features(mut.rmap)
+    route = mut._route(sc)
+    s = -sc.mission.start_pos
+    junctions, rings, ramps = [], [], []
+    for i, e in enumerate(route):
+        edge = mut.rmap.edge(e)
+        s0, s = s, s + edge.getLength()
+        if e in feats["ring_edges"]:
+            rings.append((s0, s))
+        if e in feats["ramp_edges"]:
+            ramps.append((s0, s))
+        if i + 1 < len(route):
+            conns = [c for c in edge.getConnections(mut.rmap.edge(route[i + 1])) if c.getFromLane().allows(PASSENGER)]
+            if conns:
+                cls = right_of_way(conns[0])
+                control = {"traffic_light": "signal", "stop": "yield"}.get(cls, cls)
+                d = conns[0].getDirection()
+                turn = ("turn_left" if d in ("l", "L") else "turn_right" if d in ("r", "R") else "straight")
+                if e in feats["ring_edges"]:
+                    turn = "straight"
+                junctions.append((s, i, control, turn, edge.getToNode().getID()))
+    cache[key] = {"junctions": junctions, "rings": rings, "ramps": ramps}
+    return cache[key]
+
+
+def _distance(mut: Mutator, sc: Scenario, lane_id: str, pos: float) -> float | None:
+    """[m] along the ego's route from its start to ``pos`` on ``lane_id`` (None: not on the route)."""
+    edge = mut.rmap.lane(lane_id).getEdge().getID()
+    route = mut._route(sc)
+    if edge not in route:
+        return None
+    i = route.index(edge)
+    return sum(mut.rmap.edge(e).getLength() for e in route[:i]) - sc.mission.start_pos + pos
+
+
+def _lateral(mut: Mutator, sc: Scenario, actor) -> float | None:
+    """[m] left (+) of the ego's lane where ``actor`` starts, on the same route edge (None: elsewhere)."""
+    edge = mut.rmap.lane(actor.start_lane).getEdge().getID()
+    route = mut._route(sc)
+    if edge not in route:
+        return None
+    g = mut.rmap.geom(mut.ego_lane(sc, route.index(edge)))
+    ex, ey, h = g.position(min(actor.start_pos, g.length - 0.1))
+    x, y, _ = mut.rmap.geom(actor.start_lane).position(actor.start_pos)
+    return -(x - ex) * math.sin(h) + (y - ey) * math.cos(h)
+
+
+def _filtered(situation: Situation, keep: Callable | None) -> Situation:
+    """``situation`` whose draws are kept only when every actor passes ``keep(actor)``."""
+    if keep is None:
+        return situation
+
+    def build(mut, sc, rng):
+        built = situation.build(mut, sc, rng)
+        if built is None or not built[0] or not all(keep(a) for a in built[0]):
+            return None
+        return built
+
+    return Situation(situation.name, situation.nhtsa, build)
+
+
+# ------------------------------------------------------------------------------------------- parties
+def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str) -> list[Situation]:
+    """The situations that create ``party`` (with its side filter), for the column ``col``."""
+    kind, approach = party.split("/", 1)
+    side = "left" if approach.endswith("left") else "right" if approach.endswith("right") else None
+    if kind == "none":
+        return [Situation("grip", "", cat.slippery_braking_zone)]
+    if kind == "pedestrian":
+        if not mut._walkable(sc):
+            return []
+        if approach == "along":
+            return [Situation("walker_along", "", _walker_along)]
+        keep = partial(_on_side, mut, sc, side)
+        # it reaches the road 1 s after to 1.5 s before the ego is expected there (the catalogue's 0-4 s early
+        # gives a post-encroachment time over 2 s, no close encounter, in a third of the draws)
+        crosses = partial(cat.walker_crosses, early=(-1.0, 1.5))
+        return [_filtered(Situation("walker_crosses", "", crosses), keep)]
+    if approach == "ahead":
+        names = {"brake": ("lead_brakes", "brake_check", "lead_stopped"),
+                 "stop_go": ("lead_stopped", "pulls_out", "lead_brakes"),
+                 "cruise": ("lead_slower", "slow_ahead")}.get(col)
+        pool = [s for s in (*cat.SITUATIONS, *prog.PROGRAMS) if s.name in
+                (names or ("lead_stopped", "lead_slower", "lead_brakes", "pulls_out", "brake_check", "slow_ahead",
+                           "hidden_stopped"))]
+        return pool
+    if approach == "behind":
+        return [Situation("follower", "", follower)]
+    if approach in ("left", "right"):
+        keep = partial(_on_side, mut, sc, side)
+        return [_filtered(s, keep) for s in (*prog.PROGRAMS, *cat.SITUATIONS)
+                if s.name in ("beside", "aborted_lane_change", "cut_in", "squeeze")]
+    if approach in ("rear_left", "rear_right"):
+        keep = partial(_on_side, mut, sc, side)
+        return [_filtered(s, keep) for s in prog.PROGRAMS if s.name in ("overtake_cut_in", "beside")]
+    if approach == "oncoming":
+        return [Situation("oncoming", "", oncoming),
+                Situation("crossing", "", partial(_crossing, want="oncoming", col=col))]
+    return [Situation("crossing", "", partial(_crossing, want=approach, col=col))]  # crossing_left / _right
+
+
+def _on_side(mut: Mutator, sc: Scenario, side: str | None, actor) -> bool:
+    lat = _lateral(mut, sc, actor)
+    if side is None or lat is None:
+        return side is None
+    return lat > 0.5 if side == "left" else lat < -0.5
+
+
+def _column_filter(mut: Mutator, sc: Scenario, col: str) -> Callable | None:
+    """A filter on an actor's start for the column: near a junction of that control or turn, or on a ring or
+    ramp edge; None when the column does not say where."""
+    marks = _marks(mut, sc)
+    if col in ("roundabout", "merge", "ramp"):
+        spans = marks["rings"] if col == "roundabout" else marks["ramps"]
+        return lambda a: _within(mut, sc, a, [(lo - 30.0, hi) for lo, hi in spans])
+    spots = _junction_spots(marks, col)
+    if spots is None:
+        return None
+    return lambda a: _within(mut, sc, a, [(s - NEAR_JUNCTION_M, s + 5.0) for s in spots])
+
+
+def _junction_spots(marks: dict, col: str) -> list[float] | None:
+    """Distances [m] of the route's junctions that a column wants (None: any place)."""
+    if col.startswith("signal/"):
+        return [s for s, _, c, _, _ in marks["junctions"] if c == "signal"]
+    if col in ("priority", "yield"):
+        return [s for s, _, c, _, _ in marks["junctions"] if c == col]
+    if col in ("turn_left", "turn_right"):
+        return [s for s, _, _, t, _ in marks["junctions"] if t == col]
+    return None
+
+
+def _within(mut: Mutator, sc: Scenario, actor, spans: list[tuple[float, float]]) -> bool:
+    d = _distance(mut, sc, actor.start_lane, actor.start_pos)
+    return d is not None and any(lo <= d <= hi for lo, hi in spans)
+
+
+# ------------------------------------------------------------------------------------------- builders
+def _crossing(mut, sc, rng, want: str, col: str):
+    """A lawful vehicle timed to a junction of the route (the catalogue's crossing traffic) from the approach
+    ``want`` (``crossing_left``, ``crossing_right``, ``oncoming``), at a junction the column allows."""
+    marks = _marks(mut, sc)
+    spots = _junction_spots(marks, col)
+    nodes = None if spots is None else {n for s, _, _, _, n in marks["junctions"] if s in spots}
+    route = mut._route(sc)
+
+    def keep(option) -> bool:
+        i, _, lane_id, _, _, node, _, _ = option
+        if nodes is not None and node not in nodes:
+            return False
+        h_ego = _end_heading(mut.rmap.edge(route[i]))
+        dh = math.remainder(_end_heading(mut.rmap.lane(lane_id).getEdge()) - h_ego, math.tau)
+        if want == "oncoming":
+            return abs(dh) >= 3 * math.pi / 4
+        # it heads to the ego's left (dh > 0): it comes from the ego's right
+        return math.pi / 4 < abs(dh) < 3 * math.pi / 4 and (dh > 0) == (want == "crossing_right")
+
+    return cat.crossing_traffic(mut, sc, rng, keep=keep)
+
+
+def _end_heading(edge) -> float:
+    pts = edge.getShape()
+    (x0, y0), (x1, y1) = pts[-2][:2], pts[-1][:2]
+    return math.atan2(y1 - y0, x1 - x0)
+
+
+def _light_at(mut, sc, rng, col: str):
+    """The light the last actor meets the ego at turns yellow as the ego arrives (amber), or earlier (red)."""
+    built = cat.light_changes(mut, sc, rng)
+    if built is None:
+        return None
+    actors, puddles, weather, desc, shifts = built
+    if col == "signal/red":  # a few seconds more: the ego arrives after the yellow
+        shifts = [s.model_copy(update={"shift": round((s.shift + rng.uniform(3.0, 8.0)) % 3600.0, 2)})
+                  for s in shifts]
+        desc = desc.replace("turns yellow", "turns red")
+    return actors, puddles, weather, desc, shifts
+
+
+def follower(mut, sc, rng):
+    """A lawful vehicle behind the ego on its lane, faster than the ego: it closes in. Where the ego starts
+    near its edge's beginning, it enters the lane behind the ego once the ego has driven on."""
+    lane = sc.mission.start_lane
+    limit = lane_limit(mut, lane)
+    speed = round(limit * rng.uniform(0.8, 1.1), 2)
+    back = rng.uniform(12.0, 40.0)  # [m] behind the ego's start, or behind the ego when it departs
+    if sc.mission.start_pos - back >= 1.0:
+        pos, depart = round(sc.mission.start_pos - back, 2), 0.0
+    else:
+        pos = 1.0
+        depart = round(mut._ego_eta(sc, max(back - sc.mission.start_pos, 0.0)), 1)
+    a = cat.Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.AUTOPILOT, start_lane=lane,
+                  start_pos=pos, speed=speed, depart=depart, dest_edge=cat._dest(mut, sc))
+    return [a], [], {}, f"{a.id} follows the ego on {lane} from {pos:.1f} m at {speed:.1f} m/s, departing {depart} s"
+
+
+def oncoming(mut, sc, rng):
+    """A lawful vehicle on the road the other way, driving towards the ego (it passes close by)."""
+    route = mut._route(sc)
+    options = []
+    for i, e in enumerate(route):
+        edge = mut.rmap.edge(e)
+        for o in edge.getToNode().getOutgoing():
+            if o.getToNode() == edge.getFromNode() and mut.rmap.is_normal_edge(o):
+                options += [(i, ln) for ln in o.getLanes() if ln.allows(PASSENGER)]
+    if not options:
+        return None
+    i, lane = rng.choice(options)
+    speed = round(lane_limit(mut, lane.getID()) * rng.uniform(0.6, 1.0), 2)
+    # the ego reaches the middle of route edge i at t_meet; the other starts as far from there as it drives
+    mid = mut.rmap.route_length(route[:i + 1], sc.mission.start_pos) - mut.rmap.edge(route[i]).getLength() / 2
+    t_meet = mut._ego_eta(sc, max(mid, 0.0)) + rng.uniform(-1.0, 1.0)
+    pos = round(lane.getLength() / 2 - speed * max(t_meet, 0.0), 2)
+    depart = 0.0
+    if pos < 1.0:  # too far: it departs later from its lane's start
+        depart, pos = round((1.0 - pos) / speed, 1), 1.0
+    a = cat.Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.AUTOPILOT, start_lane=lane.getID(),
+                  start_pos=pos, speed=speed, depart=depart, dest_edge=lane.getEdge().getID())
+    return [a], [], {}, f"{a.id} comes the other way on {lane.getID()} at {speed:.1f} m/s, departing {depart} s"
+
+
+def _walker_along(mut, sc, rng):
+    """A walker on the pavement (or a shared lane's edge) ahead of the ego, walking or standing."""
+    nav = rng.choice((NavType.AUTOPILOT, NavType.IMMOBILE))
+    m = mut.add_actor(sc, rng, ActorKind.PEDESTRIAN, nav)
+    if m.scenario is sc:
+        return None
+    return [m.scenario.actors[-1]], [], {}, m.description
+
+
+# ------------------------------------------------------------------------------------------- conditions
+def _condition(mut: Mutator, sc: Scenario, band: str, condition: str, rng: random.Random) -> tuple[Mutation, bool]:
+    """A vehicle ahead where the ego is expected at ``band``, under ``condition``'s weather (a low-friction
+    patch where it brakes or turns for ``low_friction``)."""
+    lo, hi = BANDS.get(band, (0.0, 99.0))
+
+    def at_speed(actor) -> bool:
+        d = _distance(mut, sc, actor.start_lane, actor.start_pos)
+        return d is not None and 0.8 * lo <= prog._ego_speed(mut, sc, d) <= 1.2 * hi
+
+    if condition == "low_friction":
+        m = add_situation(mut, sc, Situation("grip", "", cat.slippery_braking_zone), rng)
+        return Mutation(m.scenario, f"aim {band}|{condition}: {m.description}", m.retries), False
+    pool = [s for s in (*cat.SITUATIONS, *prog.PROGRAMS)
+            if s.name in ("lead_stopped", "lead_brakes", "brake_check", "slow_ahead", "lead_slower", "pulls_out")]
+    m = add_situation(mut, sc, _filtered(rng.choice(pool), at_speed if band != "0-10 km/h" else None), rng)
+    w = _weather(mut, sc, m.scenario, condition, rng)
+    new = m.scenario.model_copy(update={"weather": w})
+    return Mutation(new, f"aim {band}|{condition}: {m.description}; weather {condition}", m.retries), True
+
+
+def _weather(mut: Mutator, sc: Scenario, new: Scenario, condition: str, rng: random.Random):
+    """``new``'s weather with ``condition`` made to hold (and the others not), at the new actor's place."""
+    w = {"fog": round(rng.uniform(0.0, 20.0), 1), "rain": round(rng.uniform(0.0, 20.0), 1),
+         "wetness": round(rng.uniform(0.0, 20.0), 1), "wind": round(rng.uniform(0.0, 30.0), 1),
+         "sun_altitude_deg": 45.0}
+    if condition == "fog":
+        w["fog"] = round(rng.uniform(30.0, 100.0), 1)
+    elif condition == "wet":
+        w[rng.choice(("rain", "wetness"))] = round(rng.uniform(30.0, 100.0), 1)
+    elif condition == "wind":
+        w["wind"] = round(rng.uniform(40.0, 100.0), 1)
+    elif condition == "low_sun":  # ahead of the ego where the new actor is (else where it starts)
+        lane, pos = (new.actors[-1].start_lane, new.actors[-1].start_pos) if len(new.actors) > len(sc.actors) \
+            else (sc.mission.start_lane, sc.mission.start_pos)
+        h = mut.rmap.geom(lane).position(pos)[2]
+        w["sun_altitude_deg"] = round(rng.uniform(0.0, 15.0), 1)
+        w["sun_azimuth_deg"] = round(((90.0 - math.degrees(h)) + rng.uniform(-20.0, 20.0)) % 360.0, 1)
+    return new.weather.model_copy(update=w)
+

@@ -1,0 +1,137 @@
+"""The mutator aims at unreached interaction-coverage cells, and a job never re-runs an execution's effect."""
+
+from __future__ import annotations
+
+import json
+import random
+
+import pytest
+
+from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
+from drivefuzz.oracle import OracleSettings
+from drivefuzz.scenario import Weather
+from drivefuzz.scenario.roadmap import load_roadmap
+from drivefuzz.scenario.seed import list_seeds
+from drivefuzz.scenario.sumofiles import read_scenario
+from drivefuzz.search.aim import _lateral, aimed, pick_cell
+from drivefuzz.search.effect import effect_hash
+from drivefuzz.search.mutate import MutationConfig, Mutator
+from drivefuzz.search.risk import risk_score
+from drivefuzz.search.schedule import member_value
+from drivefuzz.sim.execute import execute
+from drivefuzz.sim.world import sun_glare
+from drivefuzz.triage.coverage import execution_cells
+
+from conftest import ROOT
+
+
+@pytest.fixture(scope="module")
+def town_seeds():
+    return [read_scenario(p) for p in list_seeds(ROOT / "seeds" / "town")]
+
+
+@pytest.fixture(scope="module")
+def mut(town_seeds):
+    return Mutator(load_roadmap(town_seeds[0].network_path()))
+
+
+# ------------------------------------------------------------------ the effect hash
+def test_the_effect_hash_ignores_only_what_no_execution_reads(town_seeds):
+    sc = town_seeds[0]
+    h = effect_hash(sc)
+    same = [sc.model_copy(update={"name": "other"}),
+            sc.model_copy(update={"weather": sc.weather.model_copy(update={"cloud": 80.0, "puddle_density": 50.0})}),
+            # a high sun (the seed's 90 degrees) cannot dazzle: where it stands is read nowhere
+            sc.model_copy(update={"weather": sc.weather.model_copy(update={"sun_azimuth_deg": 123.0,
+                                                                            "sun_altitude_deg": 45.0})})]
+    assert all(effect_hash(s) == h for s in same)
+    differ = [sc.model_copy(update={"weather": Weather(fog=30.0)}),
+              sc.model_copy(update={"weather": Weather(sun_altitude_deg=10.0, sun_azimuth_deg=90.0)}),
+              sc.model_copy(update={"seed": sc.seed + 1})]
+    assert len({effect_hash(s) for s in differ} | {h}) == len(differ) + 1
+    low = Weather(sun_altitude_deg=10.0, sun_azimuth_deg=90.0)  # a low sun: its azimuth decides the glare
+    assert effect_hash(sc.model_copy(update={"weather": low})) != effect_hash(
+        sc.model_copy(update={"weather": low.model_copy(update={"sun_azimuth_deg": 270.0})}))
+
+
+def test_a_job_never_runs_a_mutant_whose_effect_it_has_run(tmp_path, town_seeds):
+    # no actors may be added: every member only changes the weather, and a sun moved about while it stands
+    # high changes nothing; without the check a third of the members would repeat their parent
+    cfg = FuzzConfig(population=4, seed=3, max_execs=24, reproduce=0, shrink=0,
+                     mutation=MutationConfig(max_actors=0, puddle_probability=0.0))
+    Campaign(tmp_path / "out", town_seeds[:1], cfg).run()
+    journal = [json.loads(line) for line in (tmp_path / "out" / "jobs" / "000" / "journal.jsonl").read_text()
+               .splitlines()]
+    ends = [r for r in journal if r.get("event") == "end"]
+    effects = [r["effect"] for r in ends]
+    assert len(ends) == 24 and len(set(effects)) == len(effects)
+    assert any(r.get("redraw", 0) > 0 for r in ends)  # some first draws repeated an execution: drawn again
+
+
+# ------------------------------------------------------------------ aiming
+def test_a_cell_is_drawn_from_each_projection_in_turn_and_deterministically():
+    cells = ["party-element:vehicle/ahead|edge", "party-manoeuvre:vehicle/ahead|brake",
+             "party-manoeuvre:vehicle/behind|brake", "speed-condition:0-10 km/h|fog"]
+    picks = [pick_cell(cells, random.Random(k)) for k in range(60)]
+    assert picks == [pick_cell(cells, random.Random(k)) for k in range(60)]
+    share = sum(p.startswith("party-element") for p in picks) / len(picks)
+    assert 0.2 < share < 0.5  # one of three projections, though it has one cell of four
+    assert pick_cell([], random.Random(0)) is None
+
+
+def _aim(mut, sc, cell, tries=20, start=0):
+    for k in range(start, start + tries):
+        m, weather_set = aimed(mut, sc, cell, random.Random(f"{cell}/{k}"))
+        if m.scenario is not sc:
+            return m, weather_set
+    raise AssertionError(f"nothing built for {cell}")
+
+
+def test_aimed_actors_stand_where_their_cell_wants_them(mut, town_seeds):
+    multi = next(s for s in town_seeds if len(mut.rmap.lane(s.mission.start_lane).getEdge().getLanes()) >= 3)
+    for side in ("left", "right"):
+        m, _ = _aim(mut, multi, f"party-manoeuvre:vehicle/{side}|cruise")
+        lat = _lateral(mut, multi, m.scenario.actors[-1])
+        assert lat is not None and (lat > 0 if side == "left" else lat < 0), (side, m.description)
+    m, _ = _aim(mut, multi, "party-manoeuvre:pedestrian/crossing_right|cruise")
+    walker = m.scenario.actors[-1]
+    assert walker.kind.value == "pedestrian" and _lateral(mut, multi, walker) < 0
+    m, weather_set = _aim(mut, multi, "speed-condition:10-30 km/h|fog")
+    assert weather_set and m.scenario.weather.fog >= 30.0
+    m, _ = _aim(mut, multi, "speed-condition:10-30 km/h|low_sun")
+    a = m.scenario.actors[-1]
+    assert sun_glare(m.scenario.weather, mut.rmap.geom(a.start_lane).position(a.start_pos)[2])
+
+
+@pytest.mark.parametrize("cell", ["party-manoeuvre:pedestrian/crossing_right|cruise",
+                                  "party-manoeuvre:vehicle/crossing_left|cruise",
+                                  "party-manoeuvre:vehicle/oncoming|cruise"])
+def test_an_aimed_mutant_reaches_its_party_in_a_real_run(mut, town_seeds, cell):
+    party = cell.split(":")[1].split("|")[0]
+    reached = []
+    for sc in town_seeds[2:5]:  # three missions, two aimed builds each: the party is met in one at least
+        for tries in (0, 20):
+            m, _ = _aim(mut, sc, cell, start=tries)
+            ex = execute(m.scenario, oracles=OracleSettings().instantiate())
+            cells = execution_cells(m.scenario, ex.trace, mut.rmap, risk_score(ex.trace))
+            reached.append(any(c.startswith(f"party-manoeuvre:{party}|") for c in cells))
+    assert any(reached), cell
+
+
+def test_the_mutator_aims_only_when_told_and_the_same_rng_gives_the_same_member(mut, town_seeds):
+    sc = town_seeds[2]
+    aim = ["party-manoeuvre:vehicle/oncoming|cruise", "speed-condition:10-30 km/h|wind"]
+    a = [mut.successor(sc, "all", random.Random(k), aim=aim) for k in range(12)]
+    b = [mut.successor(sc, "all", random.Random(k), aim=aim) for k in range(12)]
+    assert [m.scenario.content_hash() for m in a] == [m.scenario.content_hash() for m in b]
+    assert any(m.description.startswith("aim ") for m in a)
+    plain = [mut.successor(sc, "all", random.Random(k)) for k in range(12)]
+    assert not any(m.description.startswith("aim ") for m in plain)
+
+
+def test_member_values_of_the_guided_feedbacks():
+    assert member_value("risk", 0.5, 2.0, 1, 0.25) == pytest.approx(1.25)
+    assert member_value("coverage", 0.5, 2.0, 2, 0.5) == pytest.approx(2.0005)  # the cells decide
+    assert member_value("coverage", 0.9, 1.0, 0, 0.0) < member_value("coverage", 0.1, 1.0, 1, 0.25)
+    assert member_value("product", 0.5, 2.0, 2, 0.5) == pytest.approx(3.0)
+    assert member_value("paper", 0.5, 1.0, 3, 0.0) == pytest.approx(0.5)
