@@ -46,7 +46,8 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
   ``replay``: an excusing rule's ``other`` holds only if the careful driver fails the same way, or its replay says
   nothing about the event; otherwise the verdict is the ego's, under the rule of :data:`AVOIDED`, and its reason
   says what the careful driver did instead. Three excuses hold without a replay (their evidence says why, under
-  :data:`KEPT`), because the ego could not have been elsewhere in a way that matters:
+  :data:`KEPT`, and their reason says it after "no replay needed"), because the ego could not have been elsewhere
+  in a way that matters, or a replay would test another party rather than the ego:
 
   - *stationary*, struck in its rear half by a vehicle that did not slow by more than 1 m/s in the
     :data:`APPROACH_WINDOW`: such a car strikes whatever stands or drives slower in that lane, wherever the
@@ -55,8 +56,10 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
     the follower's to avoid by any driver's standard. A hard stop for a hazard keeps the rule's excuse only if
     the careful driver, who anticipates, had to brake and was struck too;
   - *held up* (a time-out behind slower traffic it could not pass): a leader holds up any driver behind it
-    alike, and a replay in which SUMO's leader drives differently (it reacts to the ego) would test the
-    leader, not the ego.
+    alike. A replay tests the leader instead: the fuzzer's leaders may slow when the ego follows within a
+    headway (a maneuver's headway trigger), and a careful driver 2 s back does not set one off
+    (tests/data/crawling_leader_on_the_ring: the clean ADS followed within 1.97 s, and the careful driver's
+    replay got on; tests/data/held_up_behind_a_leader_it_slowed: a ``narrow_corridor`` ego came within 0.8 s).
 
   Without ``replay`` an excuse stands from the rules alone (the triage's first, cheap verdict that names the
   signature; :func:`needs_replay` says which verdicts the triage must replay before it files them).
@@ -260,6 +263,8 @@ class _Event(StandstillRules):
                      "ego_lane": str(trace["lane"][f])}
 
     def other(self, rule: str, reason: str, **evidence) -> Attribution:
+        if KEPT in evidence:  # an excuse kept without a replay says why, in the words a reader checks
+            reason = f"{reason}; no replay needed: {evidence[KEPT]}"
         return Attribution(Fault.OTHER, reason, {**self.base, **evidence}, rule)
 
     def ego(self, rule: str, reason: str, decided: bool = False, **evidence) -> Attribution:
@@ -391,7 +396,8 @@ class _Event(StandstillRules):
         shed = float(np.nanmax(sp)) - float(oth.speed[self.f])
         if shed > 1.0:
             return None
-        return f"{oth.id} struck from behind without braking (it shed {max(shed, 0.0):.1f} m/s)"
+        return (f"{oth.id} struck from behind without braking (it shed {max(shed, 0.0):.1f} m/s): it would have struck "
+                f"a careful driver standing there too")
 
     def _came_to_ego(self, oth: Track) -> bool:
         """Whether the other body moved in the last :data:`APPROACH_WINDOW` seconds: farther than the
@@ -438,7 +444,8 @@ class _Event(StandstillRules):
         why = f" (it braked for {hazard})" if hazard else ""
         # braking no harder than comfort, lawfully in its lane: the follower's to avoid, wherever the ego drove;
         # hard braking, even for a hazard, may be what a careful driver's anticipation spares: the replay tests it
-        kept = {KEPT: "it drove lawfully in its lane and braked gently"} if hazard is None else {}
+        kept = {KEPT: "it drove lawfully in its lane and braked gently, as a careful driver does: the follower's to "
+                      "avoid"} if hazard is None else {}
         return self.other("rear_ended", f"the vehicle {oth.id} struck the ego's rear half at {dv:.1f} m/s faster while the ego "
                           f"drove lawfully in its lane, braking at most {max(peak, 0.0):.1f} m/s^2{why}",
                           peak_decel=peak, hazard=hazard, **kept)

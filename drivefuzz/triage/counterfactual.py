@@ -129,7 +129,8 @@ def test_excuse(scenario, trace, misbehavior, replay: Replay, verdict: Attributi
                            evidence, verdict.rule)
     instead = _what_careful_did(ctrace, trace, misbehavior)
     evidence["counterfactual"].update(instead[1])
-    if stuck and instead[1]["careful_distance_to_place"] <= REACHED_M and instead[1]["careful_speed_then"] <= 0.5:
+    if (stuck and instead[1]["careful_distance_to_place"] <= REACHED_M and instead[1]["careful_speed_then"] <= 0.5
+            and "careful_goal_s" not in instead[1]):
         # no oracle fired on the replay, but it stood at the same place at the event's time: it was held the same
         return Attribution(Fault.OTHER, f"{verdict.reason}; a careful driver stood there too at "
                                         f"{misbehavior.time:.1f} s", evidence, verdict.rule)
@@ -165,6 +166,10 @@ def _what_careful_did(ctrace, trace, mb) -> tuple[str, dict[str, Any]]:
     ev: dict[str, Any] = {"careful_distance_to_place": round(at, 2), "careful_speed_then": round(float(v[k]), 2)}
     where = (f"at {t_event:.1f} s it was {at:.1f} m from the place at {float(v[k]):.1f} m/s" if at > 1.0 else
              f"at {t_event:.1f} s it was at the place at {float(v[k]):.1f} m/s")
+    meta = getattr(ctrace, "meta", None) or {}
+    if meta.get("termination") == "goal_reached" and float(tc[-1]) < t_event:  # its run ended before the event's time
+        ev["careful_goal_s"] = round(float(tc[-1]), 2)
+        where = f"it reached its goal at {float(tc[-1]):.1f} s, before the event's {t_event:.1f} s"
     who = mb.actors[0] if mb.actors else None
     tr = actor_track(ctrace, who) if who is not None else None
     if tr is not None:
