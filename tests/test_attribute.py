@@ -1045,7 +1045,8 @@ def test_a_leader_at_walking_pace_on_the_ring_held_the_ego_up(tmp_path):
     assert leader == "v0" and 0.6 < share < 0.7
     v = attribute(sc, ex.trace, m, load_roadmap(net))
     assert v.fault is Fault.OTHER and v.rule == "held_up", v.reason
-    assert v.reason == "held up behind slower traffic (v0) for 66% of the run"
+    assert v.reason == ("held up behind slower traffic (v0) for 66% of the run; no replay needed: a leader it cannot "
+                        "pass holds up any driver behind it, a careful one too")
 
 
 def test_blinded_by_a_low_sun_at_a_green_light_is_the_egos(tmp_path):
