@@ -145,6 +145,10 @@ def test_reachable_cells_follow_the_network_and_the_routes(offered):
     assert not has("highway", "turn_left") and has("town", "turn_left")
     # speed bands up to the routes' limits: 50 km/h streets, 120 km/h motorway
     assert not has("town", "60+ km/h") and has("highway", "60+ km/h")
+    # per place: a party and a column count together only where one place of a route has both
+    assert has("highway", "vehicle/left|lane_change") and not has("highway", "vehicle/left|merge")  # 1-lane ramps
+    assert not has("highway", "vehicle/rear_right|ramp") and has("highway", "vehicle/ahead|ramp")
+    assert not has("roundabout", "|priority") and has("roundabout", "vehicle/crossing_right|roundabout")
     for net, cells in offered.items():
         assert {split(c)[0] for c in cells} == set(PROJECTIONS), net
         assert {f"speed-condition:10-30 km/h|{c}" for c in CONDITIONS} <= cells, net

@@ -1,10 +1,11 @@
 """Does coverage steer the search? The share of reachable interaction-coverage cells reached at equal budgets.
 
 Per network, campaigns fuzz the clean reference ADS from the committed seeds with the same strategy and the
-same number of executions, and differ only in how successors are chosen:
+same number of executions, and differ only in what the feedback does:
 
-- ``risk``: the default search (risk score, situation weight, the bonus for cells the job had not reached);
-- ``random``: a random mutant, the schedule ignoring the feedback (``--feedback random``).
+- ``risk``: the default search (risk score, situation weight, the bonus for cells the job had not reached,
+  and the mutator aimed at those cells: drivefuzz.search.aim);
+- ``random``: a random mutant, the schedule ignoring the feedback and nothing aimed (``--feedback random``).
 
 Each runs ``--reps`` times with campaign seeds 0..reps-1 (rep r uses seed r in both). Coverage is summed
 from the campaign's journals (:func:`drivefuzz.triage.coverage.campaign_coverage`) over the cells its
@@ -13,13 +14,18 @@ off: they do not change coverage, only the wall time.
 
 Printed: per network the reachable cells, per configuration the share reached in each repetition, its mean,
 and Mann-Whitney U's two-sided p of ``risk`` against ``random``; with ``--faults``, the executions to the
-first finding of each hidden fault of the reference ADS on town (``-``: not found). The last line::
+first finding of each hidden fault of the reference ADS on its network (``-``: not found), how many
+campaigns found it, and the distinct finding signatures per campaign. ``--configs`` may add the other
+guided feedbacks (``coverage``, ``product``: the value that picks successors, drivefuzz.search.schedule);
+each is compared with ``random``. The last lines::
 
     coverage, default / random: X.XX (p = ...)
 
 Usage::
 
-    python tools/eval_coverage.py [--execs 1000] [--reps 5] [--networks town,...] [--jobs 2] [--faults]
+    python tools/eval_coverage.py [--execs 1000] [--reps 5] [--networks town,...] [--jobs 2]
+                                  [--configs risk,random,coverage,product] [--dump results.json]
+                                  [--faults [--fault-execs N] [--fault-list f1,f2] [--stop-at-first] [--no-clean]]
 
 Prints only; a benchmark, not a test.
 """
@@ -27,6 +33,7 @@ Prints only; a benchmark, not a test.
 from __future__ import annotations
 
 import argparse
+import json
 import statistics
 import sys
 import tempfile
@@ -81,6 +88,8 @@ def run_one(network: str, feedback: str, rep: int, opts: dict) -> dict:
         campaign = kind(Path(tmp) / "out", _seeds(network), cfg)
         campaign.run()
         wall = time.perf_counter() - t0
+    if args.dump:
+        Path(args.dump).write_text(json.dumps(results, indent=1))
         cov = campaign_coverage(Path(tmp) / "out", write=False)
         db = sqlite3.connect(Path(tmp) / "out" / "index.sqlite")
         first = db.execute("SELECT MIN(exec_id) FROM executions WHERE finding IS NOT NULL AND verdict NOT LIKE "
@@ -90,7 +99,8 @@ def run_one(network: str, feedback: str, rep: int, opts: dict) -> dict:
         db.close()
     return {"network": network, "feedback": feedback, "rep": rep, "fault": opts.get("fault"),
             "execs": campaign.progress.execs, "reachable": cov["reachable"], "reached": cov["reached"],
-            "share": cov["share"], "first": first, "signatures": signatures, "wall": wall}
+            "share": cov["share"], "first": first, "signatures": signatures, "wall": wall,
+            "cells": sorted(c for c, h in cov["cells"].items() if h["count"])}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -107,6 +117,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fault-list", default="", help="with --faults: only these faults (comma-separated) [all]")
     ap.add_argument("--stop-at-first", action="store_true", help="with --faults: end a fault campaign at its "
                     "first finding (the time to it is what is measured; the signature counts then mean little)")
+    ap.add_argument("--dump", default="", help="also write every campaign's result (its reached cells too) "
+                    "to this JSON file")
     ap.add_argument("--no-clean", action="store_true", help="with --faults: skip the clean coverage campaigns")
     args = ap.parse_args(argv)
     if args.reps < 1 or args.execs < 1:
@@ -125,6 +137,8 @@ def main(argv: list[str] | None = None) -> int:
     with ProcessPoolExecutor(max(args.jobs, 1)) as pool:
         results = list(pool.map(run_one, *zip(*work)))
     wall = time.perf_counter() - t0
+    if args.dump:
+        Path(args.dump).write_text(json.dumps(results, indent=1))
 
     clean = [r for r in results if r["fault"] is None]
     if clean:

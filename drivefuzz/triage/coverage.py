@@ -266,7 +266,7 @@ def reachable(rmap, scenarios: Iterable) -> list[str]:
     a road the other way, crossing vehicles only where a road enters that junction across, walkers only with a
     pavement or a crossing there). A party x element or party x turn cell is offered only where one place has
     both; the manoeuvres that happen anywhere (cruise, accelerate, brake, stop and go) take every party of the
-    route; a lane change, the parties of its multi-lane edges."""
+    route; a lane change, the parties of its multi-lane edges and their junctions."""
     places = _route_places(rmap, scenarios)
     if not places:
         return []
@@ -282,12 +282,12 @@ def reachable(rmap, scenarios: Iterable) -> list[str]:
                       for e in _phases(pl["element"]))
         if pl["turn"]:
             pm.update((p, pl["turn"]) for p in parties)
-        if pl["multilane"]:
-            pm.update((p, "lane_change") for p in roadside)
+        if pl["multilane"]:  # a lane change on the approach, then whoever meets the ego at its junction
+            pm.update((p, "lane_change") for p in parties)
         if pl["element"] == "ramp":
             pm.update((p, "merge") for p in roadside)
-        if pl["element"] == "roundabout":
-            pm.update((p, "roundabout") for p in roadside)
+        if pl["element"] == "roundabout":  # traffic entering the ring meets the ego across its path
+            pm.update((p, "roundabout") for p in parties)
     cells = [f"party-manoeuvre:{p}|{m}" for p, m in pm] + [f"party-element:{p}|{e}" for p, e in pe]
     vmax = max(pl["vmax"] for pl in places)
     bands = [name for top, name in SPEED_BANDS]
