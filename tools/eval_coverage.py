@@ -15,7 +15,9 @@ off: they do not change coverage, only the wall time.
 Printed: per network the reachable cells, per configuration the share reached in each repetition, its mean,
 and Mann-Whitney U's two-sided p of ``risk`` against ``random``; with ``--faults``, the executions to the
 first finding of each hidden fault of the reference ADS on its network (``-``: not found), how many
-campaigns found it, and the distinct finding signatures per campaign. ``--configs`` may add the other
+campaigns found it, and the distinct finding signatures per campaign. A finding is the fault's only when
+its scenario, run again with the clean reference ADS, does not show the same misbehaviour (the clean ADS
+has findings of its own: a car stopped for good behind an obstacle, say). ``--configs`` may add the other
 guided feedbacks (``coverage``, ``product``: the value that picks successors, drivefuzz.search.schedule);
 each is compared with ``random``. The last lines::
 
@@ -64,8 +66,6 @@ def _seeds(network: str):
 
 def run_one(network: str, feedback: str, rep: int, opts: dict) -> dict:
     """One campaign; its coverage and first finding (runs in a worker process)."""
-    import sqlite3
-
     from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
     from drivefuzz.scenario import AdsSpec
     from drivefuzz.triage.coverage import campaign_coverage
@@ -73,12 +73,14 @@ def run_one(network: str, feedback: str, rep: int, opts: dict) -> dict:
     ads = AdsSpec(name="ego", options={"fault": opts["fault"]} if opts.get("fault") else {})
     cfg = FuzzConfig(population=opts["population"], strategy=opts["strategy"], seed=rep, max_execs=opts["execs"],
                      feedback=feedback, ads=ads, reproduce=0, shrink=0)
+    judged: dict[str, bool] = {}  # signature -> the fault's own (the clean ADS does not fail there)
+
     class FirstFinding(Campaign):
-        """A campaign that ends at its first finding (``--stop-at-first``: only the time to it is measured)."""
+        """A campaign that ends at the fault's first finding (``--stop-at-first``: only the time to it counts)."""
 
         def out_of_budget(self) -> bool:
-            if self.progress.findings:
-                self.stop_reason = self.stop_reason or "the first finding"
+            if self.progress.findings > len(judged) and _fault_finding(self.out, judged) is not None:
+                self.stop_reason = self.stop_reason or "the fault's first finding"
                 return True
             return super().out_of_budget()
 
@@ -88,19 +90,55 @@ def run_one(network: str, feedback: str, rep: int, opts: dict) -> dict:
         campaign = kind(Path(tmp) / "out", _seeds(network), cfg)
         campaign.run()
         wall = time.perf_counter() - t0
-    if args.dump:
-        Path(args.dump).write_text(json.dumps(results, indent=1))
         cov = campaign_coverage(Path(tmp) / "out", write=False)
-        db = sqlite3.connect(Path(tmp) / "out" / "index.sqlite")
-        first = db.execute("SELECT MIN(exec_id) FROM executions WHERE finding IS NOT NULL AND verdict NOT LIKE "
-                           "'simulator-crash%' AND verdict NOT LIKE 'hang%'").fetchone()[0]
-        signatures = db.execute("SELECT COUNT(DISTINCT signature) FROM executions WHERE finding IS NOT NULL AND "
-                                "verdict NOT LIKE 'simulator-crash%' AND verdict NOT LIKE 'hang%'").fetchone()[0]
-        db.close()
+        first = _fault_finding(Path(tmp) / "out", judged, every=True) if opts.get("fault") else None
+        signatures = sum(judged.values())
     return {"network": network, "feedback": feedback, "rep": rep, "fault": opts.get("fault"),
             "execs": campaign.progress.execs, "reachable": cov["reachable"], "reached": cov["reached"],
             "share": cov["share"], "first": first, "signatures": signatures, "wall": wall,
             "cells": sorted(c for c, h in cov["cells"].items() if h["count"])}
+
+
+def _fault_finding(out: Path, judged: dict[str, bool], every: bool = False) -> int | None:
+    """The execution number of the campaign's first finding that is the fault's own: its scenario run again
+    with the clean reference ADS does not show the same misbehaviour (the clean ADS has findings of its own,
+    a car stopped for good behind an obstacle, say: those say nothing about the fault). ``judged`` caches
+    the verdict per signature (one replay each); with ``every``, every signature is judged."""
+    import json as _json
+    import sqlite3
+
+    from drivefuzz.oracle import OracleSettings
+    from drivefuzz.scenario import AdsSpec
+    from drivefuzz.scenario.sumofiles import load_scenario
+    from drivefuzz.sim.execute import execute
+
+    db = sqlite3.connect(out / "index.sqlite")
+    rows = db.execute("SELECT exec_id, key, signature, verdict FROM executions WHERE finding IS NOT NULL AND "
+                      "verdict NOT LIKE 'simulator-crash%' AND verdict NOT LIKE 'hang%' ORDER BY exec_id").fetchall()
+    db.close()
+    refs, first = None, None
+    for exec_id, key, signature, verdict in rows:
+        if signature not in judged:
+            if refs is None:  # the scenario of every hit is kept (a corpus folder named in the journal)
+                refs = {}
+                for path in (out / "jobs").glob("*/journal.jsonl"):
+                    for line in path.read_text().splitlines():
+                        try:
+                            rec = _json.loads(line)
+                        except ValueError:
+                            continue
+                        if rec.get("event") == "end" and rec.get("scenario"):
+                            refs[rec["key"]] = rec["scenario"]
+            if key not in refs:
+                continue
+            sc = load_scenario(out / refs[key]).model_copy(update={"ads": AdsSpec(name="ego")})
+            clean = execute(sc, oracles=OracleSettings().instantiate())
+            judged[signature] = not any(f"{m.oracle}/{m.kind}" == verdict for m in clean.misbehaviors)
+        if judged.get(signature) and first is None:
+            first = exec_id
+            if not every:
+                break
+    return first
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -191,7 +229,7 @@ def _fault_table(args, configs, faults, results) -> None:
         rows = [r for r in results if r["fault"] and r["feedback"] == fb]
         if rows:
             print(f"  {fb:<10}found {sum(r['first'] is not None for r in rows)}/{len(rows)}, "
-                  f"signatures {statistics.mean(r['signatures'] for r in rows):.2f}")
+                  f"the fault's own signatures {statistics.mean(r['signatures'] for r in rows):.2f}")
 
 if __name__ == "__main__":
     sys.exit(main())
