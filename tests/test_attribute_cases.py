@@ -51,3 +51,19 @@ def test_held_up_is_kept_without_a_replay_and_says_why(tmp_path):
     assert [(s.trigger.value, s.at, s.value) for s in v3.maneuvers] == [("headway", 0.8, 2.67)]
     clean = execute(sc.model_copy(update={"ads": AdsSpec(name="ego")}), oracles=OracleSettings().instantiate())
     assert not clean.misbehaviors  # the clean reference ADS, farther back, arrives
+
+
+def test_a_car_that_appears_at_the_egos_rear_and_strikes_it_is_not_the_egos(tmp_path):
+    """A campaign's finding (reference ADS with its ``no_fog_slowdown`` fault, highway, 1,000 executions, seed 2),
+    kept as data (tests/data/car_appears_at_the_egos_rear): SUMO inserts v1 at 9.2 s on the off-ramp's lane 1, 1 m
+    from its start, at 10.9 m/s, just as the ego leaves the junction on lane 0; v1 strikes the ego's rear-left in the
+    frame it appears. The verdict was 'the ego struck the vehicle v1 with its rear at 3.9 m/s' (ego, rule struck): no
+    excuse applied, since v1 had not moved in the last 2 s (it was not there). Read as not the ADS's fault (the
+    clean ADS is struck alike; the careful driver, slower, was elsewhere at 9.2 s): now the rule ``appeared``."""
+    m, old, new, _sc, ex = rejudge.judge_case(DATA / "car_appears_at_the_egos_rear", tmp_path)
+    assert (m.oracle, m.kind, m.actors) == ("collision", "vehicle", ("v1",))
+    for v in (old, new):
+        assert v.fault is Fault.OTHER and v.rule == "appeared", v.reason
+    assert new.evidence["appeared_frame"] >= m.frame - 1 and new.evidence["contact_side"] == "rear"
+    assert new.reason.startswith("the vehicle v1 appeared 2.7 m from the ego (centre to centre) ")
+    assert "no replay needed: no driver reacts within" in new.reason and not needs_replay(new)

@@ -320,6 +320,9 @@ class _Event(StandstillRules):
         side = contact_side(point)
         self.base.update(other=oth.id, other_kind=oth.kind, other_speed=float(oth.speed[f]), contact_side=side,
                          contact_point=list(point) if point else None)
+        appeared = self.rule_appeared(oth)
+        if appeared is not None:
+            return appeared
         red = ran_red(trace, f)
         if self.rule_stationary(oth, point, side, red) is None and side in ("left", "right") and oth.kind == "vehicle":
             moved = sideways_into(trace, self.rmap, oth, f, side)
@@ -347,6 +350,22 @@ class _Event(StandstillRules):
         impact = max(self.v, float(trace["speed"][f - 1])) if f > 0 else self.v
         return self.ego("struck", f"the ego struck the {what} {oth.id} with its {side} at {impact:.1f} m/s",
                         impact_speed=impact)
+
+    def rule_appeared(self, oth: Track) -> Attribution | None:
+        """The other party entered the simulation less than :data:`CAREFUL_REACTION` before the contact (SUMO put a car
+        on the lane beside or behind the ego as it passed): no driver reacts to a body that was not there; a careful
+        driver's replay that missed it was elsewhere by timing. Kept without a replay."""
+        trace, f = self.trace, self.f
+        here = ~np.isnan(oth.x[:f + 1])
+        first = int(np.argmax(here))
+        since = float(trace["t"][f] - trace["t"][first])
+        if first == 0 or since >= CAREFUL_REACTION:
+            return None
+        gap = float(np.hypot(oth.x[first] - trace["x"][first], oth.y[first] - trace["y"][first]))
+        return self.other("appeared", f"the {oth.kind} {oth.id} appeared {gap:.1f} m from the ego (centre to centre) "
+                          f"{since:.2f} s before it struck the ego's {self.base['contact_side']}",
+                          appeared_frame=first, appeared_gap=round(gap, 2),
+                          **{KEPT: f"no driver reacts within {since:.2f} s to a {oth.kind} that was not there before"})
 
     def _stood(self, red) -> bool:
         """Whether the ego stood still since :data:`STOPPED_BEFORE` before the contact, on a lane, and not just

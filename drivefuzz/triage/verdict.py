@@ -50,6 +50,7 @@ RULES: dict[str, str] = {
     "stationary_struck": "it was struck while standing still",
     "rear_ended": "it was struck from behind while driving lawfully",
     "cut_in": "a vehicle cut in closer than a careful driver can brake for",
+    "appeared": "another road user appeared beside it too late for any driver to react",
     "other_ran_red": "another vehicle entered the junction on red",
     "other_failed_to_yield": "another vehicle did not yield",
     "pedestrian": "a pedestrian stepped out too close, unseen, or into its side",
