@@ -67,3 +67,34 @@ def test_a_car_that_appears_at_the_egos_rear_and_strikes_it_is_not_the_egos(tmp_
     assert new.evidence["appeared_frame"] >= m.frame - 1 and new.evidence["contact_side"] == "rear"
     assert new.reason.startswith("the vehicle v1 appeared 2.7 m from the ego (centre to centre) ")
     assert "no replay needed: no driver reacts within" in new.reason and not needs_replay(new)
+
+
+def test_a_cut_in_on_ice_that_a_careful_driver_who_knows_the_ice_stops_for_is_the_egos(tmp_path):
+    """A campaign's finding (reference ADS with its ``ignore_pedestrians`` fault, town, 400 executions, seed 0), kept
+    as data with the one actor that matters (tests/data/cut_in_then_stops_beyond_ice): v1 moves into the ego's lane
+    A1B1_2 28 m ahead of it from 6.0 s and stops there; the ego, at 10 m/s, runs onto a puddle of friction 0.05 just
+    then and slides into v1. The cut-in rule excuses it (braking from 0.75 s later at the 0.5 m/s^2 the ice allows, a
+    careful driver could not have kept clear), and the old order filed it as an incident. The careful driver, told of
+    the puddle (map knowledge, the benchmark of what could have been done), slows before it and stops 4 m short of
+    v1: the ego's, cut_in_avoidable. (The clean reference ADS, which senses no friction either, slides the same way.)"""
+    m, old, new, _sc, _ex = rejudge.judge_case(DATA / "cut_in_then_stops_beyond_ice", tmp_path)
+    assert (m.oracle, m.kind, m.actors) == ("collision", "vehicle", ("v1",))
+    assert old.fault is Fault.OTHER and old.rule == "cut_in" and old.evidence["mu"] < 0.1, old.reason
+    assert new.fault is Fault.EGO and new.rule == "cut_in_avoidable", new.reason
+    cf = new.evidence["counterfactual"]
+    assert cf["excuse"] == "cut_in" and not cf["same_failure"] and cf["careful_closest"] < 15.0
+    assert new.reason.startswith(old.reason + ", but the careful driver's replay avoided it: it came no closer to v1")
+
+
+def test_a_careful_driver_held_at_a_red_light_says_nothing_about_a_car_that_did_not_yield(tmp_path):
+    """The twin (tests/data/turning_car_fails_to_yield_while_careful_waits_at_red, a finding of the same campaign):
+    the ego slides on ice towards B1, enters on yellow (too close to stop) and crawls through the junction; v3, whose
+    link from B2B1 must yield, turns into it and strikes its left side. The careful driver, slower for the ice it was
+    told of, meets the yellow earlier and waits at the red light: it 'slowed' for the light, not for v3, and was
+    elsewhere when v3 came by timing. The verdict was right_of_way_avoidable (ego); read as not the ADS's fault, the
+    excuse now holds and the reason says why."""
+    m, old, new, _sc, _ex = rejudge.judge_case(DATA / "turning_car_fails_to_yield_while_careful_waits_at_red", tmp_path)
+    assert (m.oracle, m.kind, m.actors) == ("collision", "vehicle", ("v3",))
+    assert new.fault is Fault.OTHER and new.rule == old.rule == "other_failed_to_yield", new.reason
+    assert new.evidence["counterfactual"]["careful_held_at_light"] == "red"
+    assert new.reason.endswith("the careful driver's replay says nothing (it stood at a red light when v3 came)")

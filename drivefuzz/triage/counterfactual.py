@@ -44,6 +44,8 @@ CAREFUL_ADS = "careful"
 #: than this from the event's place at its time, never met it (it came by earlier or later): its keeping clear
 #: says nothing about the ego's excuse.
 MET_M = 15.0
+#: [m] from its stop line, a careful driver that waits at a red or yellow light is held by the light.
+AT_STOP_LINE_M = 10.0
 #: [s] before its closest approach to the other party over which the careful driver's slowing down counts.
 REACT_WINDOW = 3.0
 #: Excuses about another vehicle's conduct at a junction or from behind: the careful driver avoided it only if it
@@ -144,6 +146,11 @@ def test_excuse(scenario, trace, misbehavior, replay: Replay, verdict: Attributi
         # it passed the other vehicle without slowing for it: it came by at another time, which is no care
         return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing (it passed "
                                         f"{misbehavior.actors[0]} without slowing for it)", evidence, verdict.rule)
+    if closest is not None and verdict.rule in VEHICLE_EXCUSES and "careful_held_at_light" in instead[1]:
+        # it slowed, but for a light at its stop line, not for the other vehicle: it was elsewhere by timing
+        return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing (it stood at a "
+                                        f"{instead[1]['careful_held_at_light']} light when {misbehavior.actors[0]} came)",
+                           evidence, verdict.rule)
     return Attribution(Fault.EGO, f"{verdict.reason}, but the careful driver's replay avoided it: {instead[0]}",
                        evidence, AVOIDED[verdict.rule])
 
@@ -152,6 +159,18 @@ def _reacted(ev: Mapping[str, Any]) -> bool:
     """Whether the careful driver slowed for the other party: at its closest approach it drove below 70 % of its
     fastest in the :data:`REACT_WINDOW` before, or below 1 m/s."""
     return ev["careful_speed_closest"] < max(0.7 * ev["careful_speed_before"], 1.0)
+
+
+def _held_at_light(ctrace, j: int) -> str | None:
+    """The state of the light the careful driver waited at in frame ``j`` of its replay (red or yellow, its stop line
+    within :data:`AT_STOP_LINE_M`, below the stationary speed), or None: what held it there, if not another party."""
+    if "tls_state" not in getattr(ctrace, "ego", {}):
+        return None
+    state = str(ctrace["tls_state"][j])
+    near = float(ctrace["tls_dist"][j]) <= AT_STOP_LINE_M  # NaN: no light ahead
+    if state in ("r", "R", "y", "Y") and near and float(ctrace["speed"][j]) <= 1.0:
+        return {"r": "red", "R": "red"}.get(state, "yellow")
+    return None
 
 
 def _what_careful_did(ctrace, trace, mb) -> tuple[str, dict[str, Any]]:
@@ -181,6 +200,9 @@ def _what_careful_did(ctrace, trace, mb) -> tuple[str, dict[str, Any]]:
             before = v[max(j - int(REACT_WINDOW / max(float(tc[1] - tc[0]), 1e-3)) if len(tc) > 1 else j, 0):j + 1]
             ev.update(careful_closest=round(float(d[j]), 2), careful_speed_closest=round(float(v[j]), 2),
                       careful_speed_before=round(float(np.nanmax(before)), 2))
+            light = _held_at_light(ctrace, j)
+            if light is not None:
+                ev["careful_held_at_light"] = light
             how = "stood" if v[j] <= STATIONARY_SPEED else f"drove at {float(v[j]):.1f} m/s"
             return (f"it came no closer to {who} than {float(d[j]):.1f} m centre to centre (about "
                     f"{max(gap, 0.0):.1f} m clear; it {how} then), and {where}", ev)
