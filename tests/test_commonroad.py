@@ -210,3 +210,52 @@ def test_a_short_seed_drives_clean_and_the_same_in_another_process(tmp_path):
     mine, theirs = _trace_cols(ex.trace), _trace_cols(other)
     for k in mine:
         np.testing.assert_array_equal(mine[k], theirs[k], err_msg=k)
+
+
+# -- a route that turns by more than a full circle: the planner gets a moving window ------------------------------
+def _loop(turns: float, radius: float = 20.0) -> np.ndarray:
+    a = np.arange(0.0, 2.0 * math.pi * turns * radius, 1.0) / radius
+    return np.stack([radius * np.sin(a), radius * (1.0 - np.cos(a))], axis=1)
+
+
+def test_a_route_within_a_turn_goes_whole_and_a_loop_goes_as_a_window_the_frame_accepts():
+    from commonroad_clcs.config import CLCSParams, ProcessingOption
+    from commonroad_rp.utility.utils_coordinate_system import CoordinateSystem
+
+    from adapters.commonroad.base import WINDOW_BACK, reference_window
+
+    half = _loop(0.5)
+    assert reference_window(half, 40) == (0, len(half))
+    loop = _loop(1.6)  # a loop ramp's 1.6 turns, 201 m
+    params = CLCSParams(processing_option=ProcessingOption.RESAMPLE)
+    with pytest.raises(Exception, match="orientation"):  # the planner's frame refuses the whole route
+        CoordinateSystem(loop, clcs_params=params)
+    for i_car in (0, 60, 150):
+        lo, hi = reference_window(loop, i_car)
+        # ahead of the car: 60 m or the rest of the route (a 3 s horizon at the loop's 8 m/s is 24 m)
+        assert lo == max(i_car - int(WINDOW_BACK), 0) and hi - i_car >= min(60, len(loop) - i_car)
+        CoordinateSystem(loop[lo:hi], clcs_params=params)  # and accepts each window
+
+
+# -- the kept reproducers of docs/bugs/commonroad-reactive-planner.md ----------------------------------------------
+BUGS = ROOT / "docs" / "bugs" / "commonroad-reactive-planner"
+#: the reproducers that drive 13-23 s before the car stops (30-50 s each on a busy machine)
+SLOW_REPLAYS = {"velocity-mode-stale-in-reset", "standstill-fallback-typeerror", "no-start-from-rest-in-bend"}
+
+
+@pytest.mark.parametrize("folder", [pytest.param(p.name, marks=[pytest.mark.slow] if p.name in SLOW_REPLAYS else [])
+                                    for p in sorted(BUGS.iterdir()) if (p / "verdict.json").is_file()])
+def test_each_kept_reproducer_replays_to_its_misbehaviour_at_its_frame_with_the_same_planner_cycles(folder):
+    from drivefuzz.scenario.sumofiles import read_scenario
+
+    verdict = json.loads((BUGS / folder / "verdict.json").read_text())
+    sc = read_scenario(BUGS / folder)
+    assert sc.ads.name == "commonroad-reactive"
+    ex = execute(sc, oracles=OracleSettings(settings=verdict["oracles"]).instantiate())
+    want = verdict["misbehaviors"][0]
+    got = ex.misbehaviors[0]
+    assert (got.oracle, got.kind, got.frame) == (want["oracle"], want["kind"], want["frame"])
+    stored = json.loads((BUGS / folder / "trace" / "meta.json").read_text())["ads_info"]["cycles"]
+    now = json.loads(json.dumps(ex.trace.meta["ads_info"]["cycles"]))
+    for key in ("t", "outcome", "error", "wall", "v_des"):  # the adapter's decisions and the planner's answers
+        assert now[key] == stored[key], key

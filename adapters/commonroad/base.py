@@ -1,10 +1,20 @@
 """The base of every CommonRoad-style planner plugin: all of the ADS except the planner call.
 
 A planner plugs in with a subclass that implements :meth:`CommonRoadADS.make_planner` (once per
-mission, with the reference path and the car) and :meth:`CommonRoadADS.plan` (one planning cycle:
+mission, with the first window of the reference path and the car), optionally
+:meth:`CommonRoadADS.set_reference` (a new window; by default the planner is made again) and
+:meth:`CommonRoadADS.plan` (one planning cycle:
 the car's rear-axle state, a ``pycrcc.CollisionChecker`` holding the road boundary, the predicted
 road users and a stop-line wall, and the desired speed; it returns a :class:`Plan` or None).
 :mod:`adapters.commonroad.reactive` is the first; docs/ads.md says how to add another.
+
+The planner gets the whole reference path in one curvilinear frame when it can: a route that turns by
+more than a full circle (a loop ramp, a roundabout taken three quarters round) cannot be, since the frame
+refuses headings beyond +-2 pi. Such a route goes in as a window that moves with the car (:data:`WINDOW_BACK`
+behind it, up to :data:`WINDOW_AHEAD` ahead, cut before its heading leaves that range), as CommonRoad users
+do on long routes. (A window on every route was tried: the planner's low-speed bends are so sensitive to
+the frame's discretisation that two clean seeds failed and none was gained.) The window moves
+when the car is :data:`WINDOW_MOVE` metres into it or nears its end; each cycle records where its window begins.
 
 Every ``replan_period`` seconds the base builds the planner's inputs (:mod:`adapters.commonroad.scene`)
 and asks for a plan; every step it tracks the newest plan: pure pursuit on the plan's rear-axle path
@@ -49,6 +59,17 @@ CURVE_DECEL = 1.5
 SPEED_GAIN = 1.0
 #: [s] the tracker reads the plan's speed and acceleration this far ahead (the actuators' lag).
 PREVIEW = 0.1
+#: [m] the planner's reference window starts this far behind the car (near its ends the frame's projection
+#: domain narrows) ...
+WINDOW_BACK = 30.0
+#: [m] ... and reaches this far past its start, or less where its heading would leave +-(2 pi - WINDOW_TURN_MARGIN)
+WINDOW_AHEAD = 230.0
+#: [rad] the window's heading stays this far inside the frame's limit of +-2 pi
+WINDOW_TURN_MARGIN = 0.3
+#: [m] the window moves on once the car is this far past its start ...
+WINDOW_MOVE = WINDOW_BACK + 60.0
+#: [m] ... or once less than this (plus twice the horizon's reach) is left ahead of the car
+WINDOW_REACH = 30.0
 #: Outcome codes of a planning cycle, as recorded in the trace.
 PLANNED, NO_PLAN, RAISED = "plan", "none", "raised"
 
@@ -91,6 +112,10 @@ class CommonRoadADS(ADS):
         max_lat_accel: float = Field(2.25, ge=0.0)  # [m/s^2] ... and the bends' limit at this (0: none)
         stop_decel: float = Field(2.0, gt=0.0)  # [m/s^2] the desired speed falls to stop at the goal or a wall
         failsafe_decel: float = Field(6.0, gt=0.0)  # [m/s^2] braking when the planner has no plan
+        # [m] the reference path reaches at least this far past the goal (with the goal lane's rest); set lower
+        # than its default, it ends there: samples past its end leave the curvilinear frame's projection domain
+        # (bug 1's reproducer, with domain_shim=false)
+        past_goal: float = Field(scene.PAST_GOAL, gt=0.0)
 
     def reset(self, mission: MissionInfo, roadmap) -> None:
         self.params = params = VehicleParams()
@@ -99,10 +124,14 @@ class CommonRoadADS(ADS):
         k_car = math.tan(params.max_road_wheel_angle) / params.wheelbase
         edges: list[str] = []
         self.ref_pts = scene.reference_path(roadmap, tuple(mission.route), mission.start_lane, mission.start_pos,
-                                            mission.goal_edge, mission.goal_pos,
+                                            mission.goal_edge, mission.goal_pos, past_goal=self.options.past_goal,
                                             max_curvature=REF_CURVATURE_SHARE * k_car, edges_out=edges)
         self.ref = scene.as_path(self.ref_pts)
         _, self.s_goal, _ = self.ref.locate(*mission.goal_xy, hint=0, window=len(self.ref_pts))
+        end = int(self.s_goal + self.options.past_goal) + 2  # the points are 1 m apart
+        if self.options.past_goal < scene.PAST_GOAL and end < len(self.ref_pts):
+            self.ref_pts = self.ref_pts[:end]
+            self.ref = scene.as_path(self.ref_pts)
         self.profile = _curve_profile(self.ref_pts, self.options.max_lat_accel)
         self.boundary, self.n_boundary = scene.boundary_group(scene.boundary_segments(roadmap, edges), self.ref_pts)
         opts = self.options
@@ -117,10 +146,12 @@ class CommonRoadADS(ADS):
         self.plan_path = None
         self.failsafe = False
         self._done = False
-        self.log: dict[str, list] = {"t": [], "outcome": [], "error": [], "wall": [], "v_des": [], "v_plan_max": []}
+        self.log: dict[str, list] = {"t": [], "outcome": [], "error": [], "wall": [], "v_des": [], "v_plan_max": [],
+                                     "ref_from": []}
         self.setup_error = ""
+        self.window = reference_window(self.ref_pts, 0)
         try:  # a planner that cannot be set up is the ADS failing: every cycle is then recorded as raised
-            self.make_planner(self.ref_pts, params)
+            self.make_planner(self.ref_pts[self.window[0]:self.window[1]], params)
         except Exception as exc:
             self.setup_error = f"at set-up: {type(exc).__name__}: {exc}"[:200]
 
@@ -129,6 +160,10 @@ class CommonRoadADS(ADS):
     def make_planner(self, reference: np.ndarray, params: VehicleParams) -> None:
         """Set the planner up for one mission: ``reference`` (n, 2) [m] reaches past the goal; ``params``
         is drivefuzz's car (every ADS drives the same car)."""
+
+    def set_reference(self, reference: np.ndarray) -> None:
+        """Give the planner a new window of the reference path (n, 2) [m]; by default it is made again."""
+        self.make_planner(reference, self.params)
 
     @abc.abstractmethod
     def plan(self, state: CarState, checker: "pycrcc.CollisionChecker", desired_speed: float) -> Plan | None:
@@ -181,7 +216,7 @@ class CommonRoadADS(ADS):
         ch, sh = math.cos(ego.heading), math.sin(ego.heading)
         state = CarState(ego.x - r * ch, ego.y - r * sh, ego.heading, ego.speed, ego.ax, ego.yaw_rate,
                          ego.road_wheel_angle)
-        error = self.setup_error
+        error = self.setup_error or self._move_window(ego.speed)
         try:
             result = None if error else self.plan(state, checker, v_des)
         except Exception as exc:  # the planner's failure is the ADS's failure: fail-safe, recorded
@@ -194,12 +229,35 @@ class CommonRoadADS(ADS):
         log["wall"].append(wall is not None)
         log["v_des"].append(round(v_des, 4))
         log["v_plan_max"].append(round(float(np.max(result.v)), 4) if result is not None else None)
+        log["ref_from"].append(self.window[0])
         self.failsafe = result is None
         if result is not None:
             self.plan_, self.plan_t0 = result, obs.t
             self.plan_path = _track_path(result, self.ref)
         elif self.plan_path is None:  # no plan yet: steer along the reference path
             self.plan_path = self.ref
+
+    def _move_window(self, speed: float) -> str:
+        """Move the planner's reference window on when the car is far enough into it or near its end;
+        '' or the error that the planner raised on the new window (the cycle then has no plan)."""
+        lo, hi = self.window
+        if lo == 0 and hi == len(self.ref_pts):
+            return ""  # the whole route in one frame
+        ahead = (hi - 1) - self.ref_idx
+        if self.ref_idx - lo < WINDOW_BACK + 10.0:
+            return ""  # just moved (a window cut short by its heading would otherwise move every cycle)
+        if self.ref_idx - lo < WINDOW_MOVE and (ahead >= WINDOW_REACH + 2.0 * speed * self.options.horizon
+                                               or hi >= len(self.ref_pts)):
+            return ""
+        new = reference_window(self.ref_pts, self.ref_idx)
+        if new == self.window:
+            return ""
+        self.window = new
+        try:
+            self.set_reference(self.ref_pts[new[0]:new[1]])
+        except Exception as exc:
+            return f"at reference window: {type(exc).__name__}: {exc}"[:200]
+        return ""
 
     def _track(self, obs: Observation) -> Control:
         """Steering and pedals that follow the newest plan (the fail-safe brakes along its path)."""
@@ -228,6 +286,26 @@ class CommonRoadADS(ADS):
         if accel >= 0.0:
             return min(accel / 3.5, 1.0), 0.0
         return 0.0, min(-accel / self.params.max_brake_decel, 1.0)
+
+
+def reference_window(pts: np.ndarray, i_car: int) -> tuple[int, int]:
+    """(first, end) indices of the planner's window of the reference path ``pts`` (1 m apart) for a car at
+    point ``i_car``: the whole path when its heading (unwrapped from its first segment's, in [-pi, pi]) stays
+    within +-(2 pi - :data:`WINDOW_TURN_MARGIN`); otherwise from :data:`WINDOW_BACK` behind the car to
+    :data:`WINDOW_AHEAD` past that, cut where its heading would leave that range."""
+    if _turn_limit(pts) is None:
+        return 0, len(pts)
+    lo = max(int(i_car) - int(WINDOW_BACK), 0)
+    hi = min(lo + int(WINDOW_AHEAD) + 1, len(pts))
+    cut = _turn_limit(pts[lo:hi])
+    return lo, hi if cut is None else lo + max(cut, 2)
+
+
+def _turn_limit(pts: np.ndarray) -> int | None:
+    """The first segment of ``pts`` whose heading, unwrapped from the first's, leaves the frame's range; or None."""
+    d = np.diff(pts, axis=0)
+    out = np.flatnonzero(np.abs(np.unwrap(np.arctan2(d[:, 1], d[:, 0]))) > 2.0 * math.pi - WINDOW_TURN_MARGIN)
+    return int(out[0]) if len(out) else None
 
 
 def _track_path(plan: Plan, ref):

@@ -15,7 +15,7 @@ drivefuzz's (wheelbase, 0.6 rad road-wheel angle, 0.8 rad/s steering rate, 9 m/s
 the power limit as CommonRoad's switching speed), not the default BMW 320i, whose steering rate
 rejects every sample of a 90-degree town turn. ``set_desired_velocity`` ignores the requested speed
 when ``current_speed == 0.0`` (it takes the planning problem's speed instead, and a car at rest stays
-there), so a car at rest is passed as moving at :data:`AT_REST` m/s.
+there), so a car at rest is passed as moving at :data:`AT_REST` m/s (option ``rest_fix``, on by default).
 
 One fix of the planner's contract (option ``domain_shim``, on by default): its kinematic check asks the
 coordinate system for each sample's Cartesian points and treats None as "out of the projection domain,
@@ -25,7 +25,8 @@ leaves the domain aborts the whole cycle (on the town seed 000, 36 of 324 cycles
 the first, unsmoothed reference; the trace's ``ads_info.domain_shim_caught`` counts the catches).
 :class:`DomainAsNone` turns those two exceptions back into None; ``domain_shim=false`` shows the
 planner as installed. docs/bugs/commonroad-reactive-planner.md, bug 1. A second fix (option ``mode_fix``,
-on by default) sets the planner's velocity mode before ``reset()`` converts the car's state (bug 3).
+on by default) sets the planner's velocity mode before ``reset()`` converts the car's state (bug 3), and a
+third (``rest_fix``) passes a car at rest as barely moving to ``set_desired_velocity`` (bug 2).
 Both are recorded in the options the trace's scenario carries; every other setting is the planner's own.
 """
 
@@ -107,6 +108,10 @@ class ReactivePlannerADS(CommonRoadADS):
         # (plan() switches the mode only afterwards): true (default) sets the mode first; false: as shipped,
         # where the first cycle below 4 m/s in a bend has no feasible sample (bug 3; 8 of 44 seeds fail on it)
         mode_fix: bool = True
+        # set_desired_velocity ignores the requested speed when current_speed == 0.0 (it takes the planning
+        # problem's): true (default) passes a car at rest as moving at AT_REST m/s; false: as shipped, a car that
+        # starts at rest stays there (bug 2)
+        rest_fix: bool = True
 
     def make_planner(self, reference: np.ndarray, params: VehicleParams) -> None:
         dt = self.options.planner_dt
@@ -120,15 +125,22 @@ class ReactivePlannerADS(CommonRoadADS):
         config.update(scenario=Scenario(dt), planning_problem=PlanningProblem(1, start, goal))
         self.planner = ReactivePlanner(config)
         logging.getLogger("RP_LOGGER").setLevel(logging.ERROR)
+        self.caught_before = 0  # what the shim caught on earlier reference windows
+        self.set_reference(reference)
+
+    def set_reference(self, reference: np.ndarray) -> None:
+        """A new curvilinear frame on ``reference`` (the planner's own set-up is kept)."""
+        old = getattr(self.planner, "_co", None)
         cls = DomainAsNone if self.options.domain_shim else CoordinateSystem
-        self.planner.set_reference_path(coordinate_system=cls(reference, clcs_params=CLCSParams(
-            processing_option=ProcessingOption.RESAMPLE)))
+        co = cls(reference, clcs_params=CLCSParams(processing_option=ProcessingOption.RESAMPLE))
+        self.caught_before += getattr(old, "caught", 0)
+        self.planner.set_reference_path(coordinate_system=co)
 
     def trace_info(self) -> dict:
         """The base class's record, and how many samples the domain shim turned from an exception into None."""
         info = super().trace_info()
-        co = getattr(getattr(self, "planner", None), "coordinate_system", None)
-        info["domain_shim_caught"] = getattr(co, "caught", 0)
+        co = getattr(getattr(self, "planner", None), "_co", None)
+        info["domain_shim_caught"] = getattr(self, "caught_before", 0) + getattr(co, "caught", 0)
         return info
 
     def plan(self, state: CarState, checker, desired_speed: float) -> Plan | None:
@@ -139,7 +151,8 @@ class ReactivePlannerADS(CommonRoadADS):
         if self.options.mode_fix:
             planner._low_vel_mode = state.speed < planner.config.planning.low_vel_mode_threshold
         planner.reset(initial_state_cart=x0, collision_checker=checker)
-        planner.set_desired_velocity(desired_speed, current_speed=max(state.speed, AT_REST))
+        current = max(state.speed, AT_REST) if self.options.rest_fix else state.speed
+        planner.set_desired_velocity(desired_speed, current_speed=current)
         result = planner.plan()
         if result is None:
             return None
