@@ -54,6 +54,7 @@ class Card:
     gif: bytes | None = None
     series_png: bytes | None = None
     notes: list[str] = field(default_factory=list)
+    ads: Any = None  # the ADS's own record up to the event (drivefuzz.triage.ads_info.AdsSummary), if it keeps one
 
 
 # ------------------------------------------------------------------- the report
@@ -170,6 +171,7 @@ def make_card(out: Path, row: FindingRow, plt, animate: bool = True) -> Card:
     except (OSError, ValueError, KeyError, IndexError, TypeError):
         card.notes.append("verdict.json is unreadable")
         return card
+    card.ads = _ads_summary(folder, card.misbehavior)
     if plt is None:
         return card
     try:
@@ -195,6 +197,20 @@ def make_card(out: Path, row: FindingRow, plt, animate: bool = True) -> Card:
         plt.close("all")
         card.notes.append(f"pictures failed ({type(exc).__name__}: {exc})")
     return card
+
+
+def _ads_summary(folder: Path, misbehavior: dict[str, Any]):
+    """The ADS's record of its decisions (``trace/meta.json``'s ``ads_info``) up to the event, or None."""
+    import json
+
+    from drivefuzz.triage.ads_info import summarize
+
+    try:
+        info = json.loads((folder / "trace" / "meta.json").read_text()).get("ads_info")
+        t = float(misbehavior["time"]) if "time" in misbehavior else None
+    except (OSError, ValueError, AttributeError, TypeError):
+        return None
+    return summarize(info, t)
 
 
 def other_party(trace, misbehavior: dict[str, Any], attribution: dict[str, Any], f: int) -> str | None:
@@ -564,7 +580,9 @@ def _card_html(c: Card) -> str:
     r, m = c.row, c.misbehavior
     pics = (_img(c.scene_png, "image/png", f"top-down view of {r.folder}") + _img(c.gif, "image/gif", "the last seconds")
             + _img(c.series_png, "image/png", "time series"))
-    notes = "".join(f'<p class="note">{_e(n)}</p>' for n in c.notes)
+    from drivefuzz.triage.ads_info import to_html
+
+    notes = "".join(f'<p class="note">{_e(n)}</p>' for n in c.notes) + to_html(c.ads)
     kind = "incident" if r.incident else "finding"
     return (f'<div class="card {kind}" id="{_e(r.folder)}" data-folder="{_e(r.folder)}">'
             f"<h3>#{r.number} {_e(r.label)}</h3>"
@@ -647,6 +665,7 @@ def _table_md(rows: list[FindingRow]) -> list[str]:
 
 def render_markdown(info: CampaignInfo, findings: list[FindingRow], incidents: list[FindingRow], card_list: list[Card],
                     notes: list[str], coverage: dict[str, Any] | None = None) -> str:
+    from drivefuzz.triage.ads_info import to_markdown
     from drivefuzz.triage.coverage_map import section_md
 
     cards = {c.row.folder: c for c in card_list}
@@ -666,7 +685,8 @@ def render_markdown(info: CampaignInfo, findings: list[FindingRow], incidents: l
                       *([f"- AV-Fuzzer crash type {CRASH_LABELS[r.crash_type]}"]
                         if r.crash_type in CRASH_LABELS and r.crash_type != "other" else []),
                       f"- {r.hits} hit(s); reproduced {r.reproduction}; first seen {_first_seen(r)}",
-                      f"- folder: `{r.folder}`", "", "```sh", r.replay, "```", ""]
+                      f"- folder: `{r.folder}`", "", *to_markdown(cards[r.folder].ads if r.folder in cards else None),
+                      "```sh", r.replay, "```", ""]
             if r.minimal is not None:
                 lines += [f"- minimal reproducer ({r.minimal.split(': ', 1)[0]}):", "", "```sh", r.minimal_replay,
                           "```", ""]
