@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import base64
 import html
+import json
 import io
 import math
 import time
