@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import base64
 import html
-import json
 import io
+import json
 import math
 import time
 from dataclasses import dataclass, field
