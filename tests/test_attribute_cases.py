@@ -1,7 +1,8 @@
-"""Kept campaign cases of excuses that the careful driver's replay overturned (issue 31): each is judged as
-``tools/rejudge.py --cases`` judges it, in the order before issue 31 (an excusing rule decided ``other`` before any
-replay) and in the current one (the excuse is a hypothesis that the careful driver's replay tests), with
-``rejudge.judge_case``, so that the test fails on the old order.
+"""Kept campaign cases of issue 31's attribution, each judged as ``tools/rejudge.py --cases`` judges it (with its
+``judge_case``): in the order before issue 31 (an excusing rule decided ``other`` before any replay) and in the
+current one (the excuse is a hypothesis that the careful driver's replay tests). An excuse overturned by the
+careful driver (cut_in) fails on the old order; its twin, where the careful driver's replay says nothing, and the
+excuses kept without a replay (held_up, appeared) say so in their reason.
 
 The cases of the other excuses that need a replay live in tests/test_attribute.py (stationary_struck,
 other_ran_red, other_failed_to_yield, pedestrian).
