@@ -38,7 +38,10 @@ def main(argv: list[str] | None = None) -> int:
     options = {}
     for kv in args.ads_option:
         k, _, v = kv.partition("=")
-        options[k] = json.loads(v) if v[:1] in "0123456789-tf[{\"" and v not in ("",) else v
+        try:
+            options[k] = json.loads(v)
+        except json.JSONDecodeError:
+            options[k] = v
     seeds = [Path(s) for s in args.seeds] or sorted(p.parent for p in ROOT.glob("seeds/*/*/scenario.json"))
     clean = 0
     for seed in seeds:
