@@ -307,8 +307,8 @@ def summarise(rows: list[dict[str, Any]], readings: dict[str, dict[str, str]]) -
           f"{c['differential']:>12} {c['caught']:>6} {_pct(c['recall']):>6} {_pct(c['recall_old']):>11} "
           f"{_pct(c['precision']):>9} {_pct(c['precision_confirmed']):>7} {_pct(c['precision_read']):>10}")
     if c["unread"]:
-        print(f"({c['unread']} finding(s) the clean ADS shares are not read yet: precision by reading counts them as not "
-              f"confirmed)")
+        print(f"({c['unread']} finding(s) the clean ADS shares are not read yet: precision by reading counts them as "
+              f"not confirmed)")
 
 
 if __name__ == "__main__":

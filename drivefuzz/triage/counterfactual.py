@@ -148,9 +148,9 @@ def test_excuse(scenario, trace, misbehavior, replay: Replay, verdict: Attributi
                                         f"{misbehavior.actors[0]} without slowing for it)", evidence, verdict.rule)
     if closest is not None and verdict.rule in VEHICLE_EXCUSES and "careful_held_at_light" in instead[1]:
         # it slowed, but for a light at its stop line, not for the other vehicle: it was elsewhere by timing
+        light = instead[1]["careful_held_at_light"]
         return Attribution(Fault.OTHER, f"{verdict.reason}; the careful driver's replay says nothing (it stood at a "
-                                        f"{instead[1]['careful_held_at_light']} light when {misbehavior.actors[0]} came)",
-                           evidence, verdict.rule)
+                                        f"{light} light when {misbehavior.actors[0]} came)", evidence, verdict.rule)
     return Attribution(Fault.EGO, f"{verdict.reason}, but the careful driver's replay avoided it: {instead[0]}",
                        evidence, AVOIDED[verdict.rule])
 
