@@ -345,8 +345,9 @@ class _DryRuns:
 @click.option("--seeds", "seeds_dir", type=click.Path(file_okay=False), help="Seed folder (default: <network's folder>/../seeds/<network>/, else ./seeds/<network>/).")
 @click.option("--ads", "ads_name", default=None, callback=_ads_from_the_command_line, help="ADS plugin under test [ego].")
 @click.option("--ads-option", multiple=True, metavar="K=V", help="ADS option, e.g. fault=speeding.")
-@click.option("--feedback", type=click.Choice(["risk", "paper", "random"]), default=None,
-              help="How successors are chosen: the risk score, the paper's driving-quality score, or at random [risk].")
+@click.option("--feedback", type=click.Choice(["risk", "paper", "random", "coverage", "product"]), default=None,
+              help="How successors are chosen: the risk score, the paper's driving-quality score, at random, new "
+                   "coverage cells first (risk breaks ties), or risk x (1 + new cells) [risk]; docs/coverage.md.")
 @click.option("--no-feedback", is_flag=True, help="Same as --feedback random (the paper's baseline).")
 @click.option("--single-pass", is_flag=True, help="One lineage per seed, then stop (the default without a budget).")
 @click.option("--report-all", is_flag=True,

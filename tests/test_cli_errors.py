@@ -179,3 +179,11 @@ def test_python_dash_m_drivefuzz_is_the_command(tmp_path):
                        capture_output=True, text=True, timeout=60)
     assert p.stdout == ""
     _one_line_error(p.returncode, p.stderr, "missing", "no such scenario")
+
+
+def test_the_fuzz_command_offers_every_feedback_the_campaign_knows():
+    from drivefuzz.campaign.config import FEEDBACKS
+    from drivefuzz.cli import main
+
+    (choice,) = [p.type for p in main.commands["fuzz"].params if p.name == "feedback"]
+    assert tuple(choice.choices) == FEEDBACKS
