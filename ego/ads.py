@@ -65,6 +65,8 @@ FAULTS = ("none", "speeding", "no_traffic_lights", "no_control", "steer_left", "
           "crossing_left_blind", "low_sun_blind")
 #: [m] the ``low_sun_blind`` fault sees obstacles only this far ahead (along the path) under sun glare
 GLARE_BLIND_M = 8.0
+#: the encounter each single-encounter fault drops (``_unseen``; "far": beyond GLARE_BLIND_M under glare)
+_BLIND = {"right_walker_blind": "right_walker", "crossing_left_blind": "crossing_left", "low_sun_blind": "far"}
 #: [m] the ``late_braking`` fault sees obstacles only this close (front bumper to their centre, along the path).
 LATE_BRAKING_M = 4.0
 #: [s], [m] the ``short_headway`` fault's time gap and standstill gap to vehicles (the IDM's T and s0).
@@ -261,9 +263,6 @@ class ReferenceADS(ADS):
         return stop_accel(v, dist)
 
 
-#: the encounter each single-encounter fault drops
-_BLIND = {"right_walker_blind": "right_walker", "crossing_left_blind": "crossing_left",
-          "low_sun_blind": "far"}
 
 def _unseen(blind: str, tr, ex: float, ey: float, ch: float, sh: float, heading: float) -> bool:
     """Whether track ``tr`` falls in the ``blind`` encounter (ego at (ex, ey), heading cos/sin ``ch``/``sh``)."""
