@@ -2,7 +2,8 @@
 ``judge_case``): in the order before issue 31 (an excusing rule decided ``other`` before any replay) and in the
 current one (the excuse is a hypothesis that the careful driver's replay tests). An excuse overturned by the
 careful driver (cut_in) fails on the old order; its twin, where the careful driver's replay says nothing, and the
-excuses kept without a replay (held_up, appeared) say so in their reason.
+excuses kept without a replay (held_up, appeared) say so in their reason. The standstill excuses that need a replay
+(queue, blocked, pedestrian_in_lane) have hand-built cases (tests/data/crawler_*, see :data:`CRAWLER_CASES`).
 
 The cases of the other excuses that need a replay live in tests/test_attribute.py (stationary_struck,
 other_ran_red, other_failed_to_yield, pedestrian).
@@ -12,6 +13,8 @@ from __future__ import annotations
 
 import importlib.util
 from pathlib import Path
+
+import pytest
 
 from drivefuzz.oracle import OracleSettings
 from drivefuzz.scenario import AdsSpec
@@ -99,3 +102,44 @@ def test_a_careful_driver_held_at_a_red_light_says_nothing_about_a_car_that_did_
     assert new.fault is Fault.OTHER and new.rule == old.rule == "other_failed_to_yield", new.reason
     assert new.evidence["counterfactual"]["careful_held_at_light"] == "red"
     assert new.reason.endswith("the careful driver's replay says nothing (it stood at a red light when v3 came)")
+
+
+#: The standstill excuses of a mission time-out (hand-built cases, tests/data/crawler_*): the reference ADS capped at
+#: a walking pace (its option ``cruise_speed`` 2 m/s: an ADS far too slow for its mission) does not reach its goal
+#: within the time limit a seed of its route gets (``drivefuzz.scenario.seed.time_limit_for``: 5 m/s on average
+#: and 45 s a traffic light); the run ends with it standing, and the rule that reads why it stands excused it (the
+#: old order filed an incident). The careful driver, at its ordinary speed, reached the goal long before the time
+#: limit, and so does the clean reference ADS: the ego's (blocked_avoidable), and the reason says what the careful
+#: driver did. (Such an excuse is reachable only on a time-out: the immobility oracle counts a red light, a queue
+#: that waits and a walker ahead as legitimate, so it fires for none of them; and a walker stands in a lane only at
+#: a pace below 0.2 m/s, which the mutator never gives her, at least 0.8 m/s.)
+CRAWLER_CASES = [
+    # v1, a slow vehicle (2.1 m/s) that turned in ahead of the ego, waits at B1's red light in A1B1_1; the ego stops
+    # behind it 20 s before the time limit, with A1B1_2 (which also leads on) free
+    ("crawler_waits_in_a_queue_at_a_red_light", "queue", "the ego waits in a queue that will move: v1 waits at the "
+                                                         "end of A1B1_1"),
+    # the same on the left-turn lane, the only lane of A1B1 that leads to B1B2: 'blocked' reads the queue as a
+    # blockage of every lawful way on
+    ("crawler_blocked_in_the_only_lane_that_turns_left", "blocked", "every lawful way forward is blocked by "
+                                                                    "stationary bodies: A1B1_2 by v1"),
+    # p1 crosses A1A2 at 0.15 m/s (she shuffles: 'still' to the rules); the ego waits for her from 82 s to the time
+    # limit, 90 s; the careful driver passed her place at about 25 s, before she stepped out at 63 s
+    ("crawler_stands_behind_a_shuffling_walker", "pedestrian_in_lane", "the pedestrian p1 stands in the ego's path"),
+]
+
+
+@pytest.mark.parametrize("case,rule,reason", CRAWLER_CASES, ids=[c[1] for c in CRAWLER_CASES])
+def test_a_standstill_excuse_of_a_time_out_needs_the_careful_driver_to_time_out_too(tmp_path, case, rule, reason):
+    m, old, new, sc, _ex = rejudge.judge_case(DATA / case, tmp_path)
+    assert (m.oracle, m.kind) == ("mission", "timeout") and sc.ads.options == {"cruise_speed": 2.0}
+    assert m.details["stopped_for"] < 60.0  # a standstill shorter than the immobility oracle's: the mission's
+    assert (old.fault, old.rule, old.reason) == (Fault.OTHER, rule, reason), old.reason
+    assert needs_replay(old)
+    assert new.fault is Fault.EGO and new.rule == "blocked_avoidable", new.reason
+    cf = new.evidence["counterfactual"]
+    assert cf["excuse"] == rule and not cf["same_failure"] and cf["misbehaviors"] == []
+    assert cf["careful_goal_s"] < m.time - 20.0
+    head = f"{reason}, but the careful driver's replay avoided it: it got on (it reached its goal at "
+    assert new.reason.startswith(head) and new.reason.endswith(f" s, before the event's {m.time:.1f} s)"), new.reason
+    clean = execute(sc.model_copy(update={"ads": AdsSpec(name="ego")}), oracles=OracleSettings().instantiate())
+    assert not clean.misbehaviors  # the clean reference ADS arrives too: a differential event
