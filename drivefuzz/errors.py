@@ -1,8 +1,8 @@
 """The one exception root of drivefuzz.
 
 User mistakes subclass both :class:`DriveFuzzError` and the matching builtin, and
-their message names the file, the field and what would be valid. Only ``cli.py``
-turns them into exit codes.
+their message names the file, the field and what would be valid. Only the commands (``drivefuzz/cli/``)
+turn them into exit codes.
 """
 
 from __future__ import annotations

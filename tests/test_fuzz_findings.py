@@ -114,7 +114,7 @@ def test_report_all_measures_the_reproduction_of_incidents_too():
     without it they are not (their reruns would be executions taken from the search). A manifest from before
     the option resumes as it ran: incidents reproduced."""
     from drivefuzz.campaign.fuzz import FuzzConfig
-    from drivefuzz.cli import _fuzz_config
+    from drivefuzz.cli.fuzz import _fuzz_config
 
     def cfg(**cli):
         return _fuzz_config({}, None, {"budget": None, **cli}, None, (), (), ())

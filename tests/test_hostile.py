@@ -507,7 +507,7 @@ def test_a_corrupt_index_is_rebuilt_from_the_journals(tmp_path, campaign_templat
 # ----------------------------------------------------------------------------- seeds
 def test_seeds_are_not_written_into_a_foreign_default_folder(tmp_path, monkeypatch):
     """No --seeds, and ./seeds/<network>/ holds other things: they stay untouched."""
-    from drivefuzz import cli
+    from drivefuzz.cli import common as cli
     from drivefuzz.scenario.sumofiles import load_scenario
 
     monkeypatch.chdir(tmp_path)
@@ -519,7 +519,7 @@ def test_seeds_are_not_written_into_a_foreign_default_folder(tmp_path, monkeypat
     (foreign / "notes.txt").write_text("mine")
     new = load_scenario(SEEDS / "000")
     monkeypatch.setattr("drivefuzz.scenario.seed.generate_seeds", lambda *a, **k: [new])  # no dry runs
-    assert cli._seeds_for(str(net), None) == [new]
+    assert cli.seeds_for(str(net), None) == [new]
     assert sorted(p.name for p in foreign.iterdir()) == ["notes.txt"]
 
 

@@ -3,7 +3,7 @@
 In the spirit of AFL's status screen: how long it has run and how much budget is
 left, executions per second, where the search is (seed, lineage, cycle), the best
 risk so far, the findings by signature with their hits, the last finding, and how
-many workers are busy. ``drivefuzz fuzz`` and ``drivefuzz campaign`` (``cli.py``)
+many workers are busy. ``drivefuzz fuzz`` and ``drivefuzz campaign`` (``cli/``)
 hand a :class:`StatusPrinter` their campaigns; on a terminal it redraws a rich
 table in place (``rich.live.Live``), elsewhere (a log file, a pipe, CI) it prints
 one plain line every :data:`PLAIN_EVERY_S` seconds, so that a log stays readable.
