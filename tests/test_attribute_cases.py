@@ -3,7 +3,8 @@
 current one (the excuse is a hypothesis that the careful driver's replay tests). An excuse overturned by the
 careful driver (cut_in) fails on the old order; its twin, where the careful driver's replay says nothing, and the
 excuses kept without a replay (held_up, appeared) say so in their reason. The standstill excuses that need a replay
-(queue, blocked, pedestrian_in_lane) have hand-built cases (tests/data/crawler_*, see :data:`CRAWLER_CASES`).
+(queue, blocked, pedestrian_in_lane) have hand-built cases (tests/data/crawler_*, see :data:`CRAWLER_CASES`), and so
+has rear_ended after a hard stop for a hazard (tests/data/merged_ahead_of_a_car_it_had_to_yield_to_then_braked_hard).
 
 The cases of the other excuses that need a replay live in tests/test_attribute.py (stationary_struck,
 other_ran_red, other_failed_to_yield, pedestrian).
@@ -143,3 +144,37 @@ def test_a_standstill_excuse_of_a_time_out_needs_the_careful_driver_to_time_out_
     assert new.reason.startswith(head) and new.reason.endswith(f" s, before the event's {m.time:.1f} s)"), new.reason
     clean = execute(sc.model_copy(update={"ads": AdsSpec(name="ego")}), oracles=OracleSettings().instantiate())
     assert not clean.misbehaviors  # the clean reference ADS arrives too: a differential event
+
+
+def test_a_hard_stop_after_taking_a_way_it_had_to_yield_is_struck_from_behind_where_a_careful_driver_is_not(tmp_path):
+    """A hand-built case (tests/data/merged_ahead_of_a_car_it_had_to_yield_to_then_braked_hard; reference ADS with
+    its ``no_walker_prediction`` fault, town): the ego crosses the priority junction A1 from A0A1_2 into A1A2_1 at
+    7.8 m/s on a link that must yield to B1A1_1's right turn into the same lane, along which v1 (a linear car: it
+    never brakes) comes at 8 m/s; v1 turns in 6 m behind it. 1 s later p1, crossing A1A2 at 1.2 m/s, steps into the
+    ego's corridor; the ego, which did not predict her, brakes at 4.1 m/s^2 (harder than comfort) and v1 strikes its
+    rear at 5.1 m/s. The rear rule excuses a hard stop for a hazard (p1), and the old order filed an incident. The
+    careful driver, who predicts a moving car into its path, braked in the junction for v1, let it turn in ahead and
+    was never struck: the ego's (rear_end_avoidable), and the reason says how close the careful driver came to v1 and
+    how slowly it drove then."""
+    from drivefuzz.scenario.roadmap import load_roadmap
+    from drivefuzz.triage.attribute import COMFORT_DECEL, MET_M
+    from drivefuzz.triage.evidence import actor_track, ego_link, other_link
+
+    m, old, new, sc, ex = rejudge.judge_case(DATA / "merged_ahead_of_a_car_it_had_to_yield_to_then_braked_hard", tmp_path)
+    assert (m.oracle, m.kind, m.actors) == ("collision", "vehicle", ("v1",))
+    assert sc.ads.options["fault"] == "no_walker_prediction"
+    assert (old.fault, old.rule) == (Fault.OTHER, "rear_ended") and needs_replay(old), old.reason
+    assert old.evidence["hazard"] == "p1" and old.evidence["peak_decel"] > COMFORT_DECEL
+    assert old.evidence["contact_side"] == "rear" and old.reason.endswith("(it braked for p1)")
+    # the ego's way through A1 had to yield to v1's (SUMO's junction logic)
+    rmap = load_roadmap(sc.network_path())
+    mine = ego_link(ex.trace, rmap, m.frame)
+    v1 = actor_track(ex.trace, "v1")  # its passage, read while it made it (at the contact it is 12 m past it)
+    theirs = next(link[0] for k in range(m.frame, 0, -1) if (link := other_link(ex.trace, rmap, v1, k)) is not None)
+    assert (mine.getFromLane().getID(), theirs.getFromLane().getID()) == ("A0A1_2", "B1A1_1")
+    assert mine.getJunction().forbids(theirs, mine) and not mine.getJunction().forbids(mine, theirs)
+    assert new.fault is Fault.EGO and new.rule == "rear_end_avoidable", new.reason
+    cf = new.evidence["counterfactual"]
+    assert cf["excuse"] == "rear_ended" and cf["misbehaviors"] == [] and cf["careful_closest"] < MET_M
+    assert cf["careful_speed_closest"] < 0.3 * cf["careful_speed_before"]  # it slowed for v1 and let it by
+    assert new.reason.startswith(old.reason + ", but the careful driver's replay avoided it: it came no closer to v1")
