@@ -155,7 +155,9 @@ def test_a_hard_stop_after_taking_a_way_it_had_to_yield_is_struck_from_behind_wh
     rear at 5.1 m/s. The rear rule excuses a hard stop for a hazard (p1), and the old order filed an incident. The
     careful driver, who predicts a moving car into its path, braked in the junction for v1, let it turn in ahead and
     was never struck: the ego's (rear_end_avoidable), and the reason says how close the careful driver came to v1 and
-    how slowly it drove then."""
+    how slowly it drove then. Its twin, the clean reference ADS on the same scenario, brakes gently and is struck too:
+    an excuse that held without a replay (braking no harder than comfort) until the rule read that the ego had taken
+    its way through A1 ahead of v1 on a link that had to yield to v1's."""
     from drivefuzz.scenario.roadmap import load_roadmap
     from drivefuzz.triage.attribute import COMFORT_DECEL, MET_M
     from drivefuzz.triage.evidence import actor_track, ego_link, other_link
@@ -165,7 +167,8 @@ def test_a_hard_stop_after_taking_a_way_it_had_to_yield_is_struck_from_behind_wh
     assert sc.ads.options["fault"] == "no_walker_prediction"
     assert (old.fault, old.rule) == (Fault.OTHER, "rear_ended") and needs_replay(old), old.reason
     assert old.evidence["hazard"] == "p1" and old.evidence["peak_decel"] > COMFORT_DECEL
-    assert old.evidence["contact_side"] == "rear" and old.reason.endswith("(it braked for p1)")
+    assert old.evidence["contact_side"] == "rear"
+    assert old.reason.endswith("(it braked for p1); its way through A1 had to yield to v1's"), old.reason
     # the ego's way through A1 had to yield to v1's (SUMO's junction logic)
     rmap = load_roadmap(sc.network_path())
     mine = ego_link(ex.trace, rmap, m.frame)
@@ -178,3 +181,14 @@ def test_a_hard_stop_after_taking_a_way_it_had_to_yield_is_struck_from_behind_wh
     assert cf["excuse"] == "rear_ended" and cf["misbehaviors"] == [] and cf["careful_closest"] < MET_M
     assert cf["careful_speed_closest"] < 0.3 * cf["careful_speed_before"]  # it slowed for v1 and let it by
     assert new.reason.startswith(old.reason + ", but the careful driver's replay avoided it: it came no closer to v1")
+    # the clean reference ADS takes the same way ahead of v1 (it ignores a crossing car until it is in its corridor)
+    # and brakes for p1 gently (2.2 m/s^2): an excuse kept without a replay before it was read that its way through
+    # A1 had to yield to v1's; now the careful driver's replay tests it as well
+    clean = sc.model_copy(update={"ads": AdsSpec(name="ego")})
+    cex = execute(clean, oracles=OracleSettings().instantiate())
+    cm = cex.misbehaviors[0]
+    old, new = rejudge.both_orders(clean, cex.trace, cm, rmap, rejudge.careful_replay)
+    assert (cm.oracle, cm.actors, old.fault, old.rule) == ("collision", ("v1",), Fault.OTHER, "rear_ended"), old.reason
+    assert old.evidence["peak_decel"] < COMFORT_DECEL and old.evidence["took_way_at"] == "A1" and needs_replay(old)
+    assert old.reason.endswith("; its way through A1 had to yield to v1's"), old.reason
+    assert new.fault is Fault.EGO and new.rule == "rear_end_avoidable", new.reason

@@ -54,7 +54,14 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
     ego had stopped, and the ego stood lawfully there (not on red, not reaching into another's lane);
   - *rear*, struck from behind while lawfully in its lane and braking no harder than :data:`COMFORT_DECEL`:
     the follower's to avoid by any driver's standard. A hard stop for a hazard keeps the rule's excuse only if
-    the careful driver, who anticipates, had to brake and was struck too;
+    the careful driver, who anticipates, had to brake and was struck too; so does any stop just after the ego took
+    its way through a junction ahead of the follower on a link that had to yield to the follower's
+    (:data:`YIELD_WINDOW`): a careful driver yields there, and the follower is then ahead of it, not behind
+    (tests/data/merged_ahead_of_a_car_it_had_to_yield_to_then_braked_hard: the careful driver let a car that never
+    brakes turn in ahead of it, which struck the ego, braking hard with the ``no_walker_prediction`` fault or gently
+    without it). SUMO's own followers brake for the ego (their emergency braking, 9 m/s^2, matches its hardest), so
+    the follower that strikes a braking ego is one that never brakes (a linear car), which strikes a careful driver
+    in its lane as well: the careful driver escapes it by not being in that lane ahead of it (it yielded to it);
   - *held up* (a time-out behind slower traffic it could not pass): a leader holds up any driver behind it
     alike. A replay tests the leader instead: the fuzzer's leaders may slow when the ego follows within a
     headway (a maneuver's headway trigger), and a careful driver 2 s back does not set one off
@@ -140,6 +147,9 @@ APPROACH_WINDOW = 2.0
 STOPPED_BEFORE = 0.25
 #: [s] before a contact, over which a vehicle that moved into the ego's lane counts as cutting in.
 CUT_IN_WINDOW = 4.0
+#: [s] before a contact, over which a follower's passage through the junction the ego had just crossed counts: the ego
+#: took its way ahead of the follower there.
+YIELD_WINDOW = 5.0
 #: [m] how far a stationary ego may reach across the edge of the lane of a vehicle that strikes it (mirrors and a
 #: centre line drawn a little off) before it stood in that vehicle's way.
 IN_LANE_MARGIN = 0.3
@@ -461,13 +471,19 @@ class _Event(StandstillRules):
             hazard = None
         dv = float(oth.speed[f]) - self.v
         why = f" (it braked for {hazard})" if hazard else ""
+        # a way through a junction just taken ahead of the follower, that had to yield to the follower's: a careful
+        # driver yields there (then the follower is not behind it), which the replay tests
+        took = self._took_way_of(oth)
+        if took is not None:
+            why += f"; its way through {took} had to yield to {oth.id}'s"
         # braking no harder than comfort, lawfully in its lane: the follower's to avoid, wherever the ego drove;
         # hard braking, even for a hazard, may be what a careful driver's anticipation spares: the replay tests it
         kept = {KEPT: "it drove lawfully in its lane and braked gently, as a careful driver does: the follower's to "
-                      "avoid"} if hazard is None else {}
+                      "avoid"} if hazard is None and took is None else {}
+        how = "drove in its lane" if took else "drove lawfully in its lane"
         return self.other("rear_ended", f"the vehicle {oth.id} struck the ego's rear half at {dv:.1f} m/s faster while the ego "
-                          f"drove lawfully in its lane, braking at most {max(peak, 0.0):.1f} m/s^2{why}",
-                          peak_decel=peak, hazard=hazard, **kept)
+                          f"{how}, braking at most {max(peak, 0.0):.1f} m/s^2{why}",
+                          peak_decel=peak, hazard=hazard, **({"took_way_at": took} if took else {}), **kept)
 
     def rule_cut_in(self, oth: Track, point, side: str, red) -> Attribution | None:
         """A vehicle moved into the ego's lane ahead of it (or alongside), and a careful driver, braking
@@ -509,6 +525,28 @@ class _Event(StandstillRules):
             return bool(mine.getJunction().forbids(link[0], mine))
         except (IndexError, KeyError, AttributeError):
             return False
+
+    def _took_way_of(self, oth: Track) -> str | None:
+        """The junction the ego passed ahead of ``oth`` on a link that must yield to the one ``oth`` took through it in
+        the last :data:`YIELD_WINDOW` seconds (``oth``'s passage read while it made it: by the contact it may be on the
+        lane beyond), or None."""
+        trace, f = self.trace, self.f
+        mine = ego_link(trace, self.rmap, f)
+        if mine is None:
+            return None
+        w = frames_before(trace, f, YIELD_WINDOW)
+        for k in range(f, w.start - 1, -max(int(0.25 / trace.step_length), 1)):
+            link = other_link(trace, self.rmap, oth, k)
+            if link is None:
+                continue
+            node = mine.getJunction()
+            if node.getID() != link[0].getJunction().getID():
+                return None
+            try:
+                return node.getID() if node.forbids(link[0], mine) else None
+            except (IndexError, KeyError, AttributeError):
+                return None
+        return None
 
     def _hazard_ahead(self, k: int, exclude: str) -> str | None:
         """What justified hard braking at frame ``k``: a body in the path ahead, or a stop light."""
