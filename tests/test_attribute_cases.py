@@ -111,9 +111,9 @@ def test_a_careful_driver_held_at_a_red_light_says_nothing_about_a_car_that_did_
 #: and 45 s a traffic light); the run ends with it standing, and the rule that reads why it stands excused it (the
 #: old order filed an incident). The careful driver, at its ordinary speed, reached the goal long before the time
 #: limit, and so does the clean reference ADS: the ego's (blocked_avoidable), and the reason says what the careful
-#: driver did. (Such an excuse is reachable only on a time-out: the immobility oracle counts a red light, a queue
-#: that waits and a walker ahead as legitimate, so it fires for none of them; and a walker stands in a lane only at
-#: a pace below 0.2 m/s, which the mutator never gives her, at least 0.8 m/s.)
+#: driver did. (The immobility oracle counts a red light, a walker ahead and a queue that moves or waits for a light
+#: or a walker as legitimate: such a queue or walker meets the replay on a time-out. A walker stands in a lane only
+#: at a pace below 0.2 m/s, which the mutator never gives her: at least 0.8 m/s.)
 CRAWLER_CASES = [
     # v1, a slow vehicle (2.1 m/s) that turned in ahead of the ego, waits at B1's red light in A1B1_1; the ego stops
     # behind it 20 s before the time limit, with A1B1_2 (which also leads on) free
