@@ -162,7 +162,8 @@ def test_a_hard_stop_after_taking_a_way_it_had_to_yield_is_struck_from_behind_wh
     from drivefuzz.triage.attribute import COMFORT_DECEL, MET_M
     from drivefuzz.triage.evidence import actor_track, ego_link, other_link
 
-    m, old, new, sc, ex = rejudge.judge_case(DATA / "merged_ahead_of_a_car_it_had_to_yield_to_then_braked_hard", tmp_path)
+    case = DATA / "merged_ahead_of_a_car_it_had_to_yield_to_then_braked_hard"
+    m, old, new, sc, ex = rejudge.judge_case(case, tmp_path)
     assert (m.oracle, m.kind, m.actors) == ("collision", "vehicle", ("v1",))
     assert sc.ads.options["fault"] == "no_walker_prediction"
     assert (old.fault, old.rule) == (Fault.OTHER, "rear_ended") and needs_replay(old), old.reason
@@ -192,3 +193,22 @@ def test_a_hard_stop_after_taking_a_way_it_had_to_yield_is_struck_from_behind_wh
     assert old.evidence["peak_decel"] < COMFORT_DECEL and old.evidence["took_way_at"] == "A1" and needs_replay(old)
     assert old.reason.endswith("; its way through A1 had to yield to v1's"), old.reason
     assert new.fault is Fault.EGO and new.rule == "rear_end_avoidable", new.reason
+
+
+def test_trailing_slower_traffic_to_a_time_out_with_a_lane_free_is_the_egos(tmp_path):
+    """A campaign's incident (reference ADS with its ``no_walker_prediction`` fault, town, 400 executions, seed 0),
+    kept as data (tests/data/trailed_a_crawler_with_a_lane_free): v0's script slows it to 0.88 m/s once the ego
+    follows within 3.68 s; the ego trails it along C3B3_2 at 8 m for 100 s, C3B3_1 (which leads on) free beside it
+    all along, and times out 63 m short of its goal. It was excused as held up (kept without a replay: 'a leader it
+    cannot pass holds up any driver behind it'); but it could pass, and not passing is the ego's, decided, as staying
+    behind a stationary body with a lane free is (the careful driver does not overtake either: its replay would say
+    nothing). The held_up excuse stays for a leader it cannot pass (test_held_up_is_kept_without_a_replay_...)."""
+    from drivefuzz.triage.evidence import held_up
+
+    m, old, new, _sc, ex = rejudge.judge_case(DATA / "trailed_a_crawler_with_a_lane_free", tmp_path)
+    assert (m.oracle, m.kind) == ("mission", "timeout") and m.details["speed"] > 0.5
+    assert held_up(ex.trace, m.frame) == (0.76, "v0")  # what the held_up excuse read
+    for v in (old, new):
+        assert (v.fault, v.rule) == (Fault.EGO, "trailed"), v.reason
+    assert new.reason == "the ego trailed slower traffic (v0) for 76% of the run although C3B3_1 was free"
+    assert new.evidence["free_lanes"] == ["C3B3_1"] and "counterfactual" not in new.evidence

@@ -59,7 +59,8 @@ sys.path.insert(0, str(REPO / "tools"))
 from campaigns import run_campaign  # noqa: E402  (tools/, beside this script)
 
 #: Rules that see the ego's own fault on the trace (drivefuzz/triage/attribute.py: no replay needed).
-DECIDED = frozenset({"failed_to_yield", "ran_red", "lane_change_into", "stayed_behind", "stood_still", "obstacle"})
+DECIDED = frozenset({"failed_to_yield", "ran_red", "lane_change_into", "stayed_behind", "trailed", "stood_still",
+                     "obstacle"})
 #: Trace readings of the findings that the clean ADS shares (:func:`load_readings`).
 READINGS = REPO / "tools" / "attribution_readings.json"
 #: The reference ADS's faults that the committed seeds do not show (ego/ads.py).

@@ -32,9 +32,11 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
      stationary body (in a junction: the body right ahead), a pedestrian stands in its lane ahead,
      or the ego waits in a queue that will move (no parked car in it, and its head waits at the end of
      its lane, in a junction, or for a body ahead of it); a mission time-out while the ego spent most
-     of the run held up behind slower traffic. Waiting behind a stationary body with a lawful lane free is the ego's (decided:
-     the careful driver does not overtake either), also when cars queue between the ego and that
-     body (a parked car in the queue, or a car stalled in mid-lane at its head: it will not move).
+     of the run held up behind slower traffic it could not pass. Waiting behind a stationary body with a
+     lawful lane free is the ego's (decided: the careful driver does not overtake either), also when cars
+     queue between the ego and that body (a parked car in the queue, or a car stalled in mid-lane at its
+     head: it will not move); so is trailing slower traffic to a time-out with a lawful lane beside it free
+     of slower traffic (``trailed``).
 
   Rules 1-4 excuse the ego only for a body that came to it: one that moved in the last
   :data:`APPROACH_WINDOW` seconds (farther than the stationary speed takes a body, or farther than
@@ -62,9 +64,10 @@ rest are incidents) and by the signatures (:mod:`drivefuzz.triage.signature`).
     without it). SUMO's own followers brake for the ego (their emergency braking, 9 m/s^2, matches its hardest), so
     the follower that strikes a braking ego is one that never brakes (a linear car), which strikes a careful driver
     in its lane as well: the careful driver escapes it by not being in that lane ahead of it (it yielded to it);
-  - *held up* (a time-out behind slower traffic it could not pass): a leader holds up any driver behind it
-    alike. A replay tests the leader instead: the fuzzer's leaders may slow when the ego follows within a
-    headway (a maneuver's headway trigger), and a careful driver 2 s back does not set one off
+  - *held up* (a time-out behind slower traffic it could not pass: no lawful lane beside it that leads on was
+    free of slower traffic at the end): a leader holds up any driver behind it alike. A replay tests the leader
+    instead: the fuzzer's leaders may slow when the ego follows within a headway (a maneuver's headway trigger),
+    and a careful driver 2 s back does not set one off
     (tests/data/crawling_leader_on_the_ring: the clean ADS followed within 1.97 s, and the careful driver's
     replay got on; tests/data/held_up_behind_a_leader_it_slowed: a ``narrow_corridor`` ego came within 0.8 s).
 

@@ -552,6 +552,36 @@ def _bodies_on(trace, rmap, lane: str, f: int, s_from: float, reach: float):
     return sorted(out)
 
 
+def _beside(rmap, lane: str) -> list[str]:
+    """The lanes of ``lane``'s edge that a passenger car may reach from it by lane changes its markings permit."""
+    edge = rmap.lane(lane).getEdge()
+    idx = rmap.lane(lane).getIndex()
+    lanes_of = {l.getIndex(): l.getID() for l in edge.getLanes() if l.allows("passenger")}
+    out = []
+    for step, left in ((1, True), (-1, False)):
+        i = idx
+        while i + step in lanes_of and rmap.may_change(lanes_of[i], left=left):
+            i += step
+            out.append(lanes_of[i])
+    return out
+
+
+def passing_lanes(trace, rmap, f: int, slower_than: float, reach: float = 60.0) -> list[str] | None:
+    """The lawful lanes beside the ego's at ``f`` (lane changes its markings permit) in which no body from a car length
+    behind the ego to ``reach`` m ahead of it moves slower than ``slower_than`` [m/s] (NaN: any body there): lanes
+    to pass slower traffic on; None off the normal lanes."""
+    lane = str(trace["lane"][f])
+    if not lane or lane.startswith(":") or not rmap.has_lane(lane):
+        return None
+    ego_pos, _ = rmap.geom(lane).project(float(trace["x"][f]), float(trace["y"][f]))
+    out = []
+    for l in _beside(rmap, lane):
+        bodies = _bodies_on(trace, rmap, l, f, ego_pos - EGO_LENGTH, reach + EGO_LENGTH)
+        if not any(not float(actor_track(trace, b).speed[f]) >= slower_than for _d, b in bodies):
+            out.append(l)
+    return out
+
+
 def blocked_lanes(trace, rmap, f: int, reach: float = 60.0):
     """What blocks the ego standing at ``f``: ``(lanes, free, queue, root)`` with ``lanes`` the lawful
     lanes of its edge whose nearest body ahead stands still (lane -> that body), ``free`` the others,
@@ -573,15 +603,7 @@ def blocked_lanes(trace, rmap, f: int, reach: float = 60.0):
         return tracks[aid]
 
     ego_pos, _ = rmap.geom(lane).project(float(trace["x"][f]), float(trace["y"][f]))
-    edge = rmap.lane(lane).getEdge()
-    idx = rmap.lane(lane).getIndex()
-    lanes_of = {l.getIndex(): l.getID() for l in edge.getLanes() if l.allows("passenger")}
-    lawful = [lane]
-    for step, left in ((1, True), (-1, False)):
-        i = idx
-        while i + step in lanes_of and rmap.may_change(lanes_of[i], left=left):
-            i += step
-            lawful.append(lanes_of[i])
+    lawful = [lane] + _beside(rmap, lane)
     blocked, free, queue, root = {}, [], None, None
     for l in lawful:
         s_from = ego_pos if l == lane else ego_pos - EGO_LENGTH  # a body alongside blocks a change too

@@ -1,6 +1,7 @@
 """The standstill rules of attribution: an ego that stood still (immobility) or did not reach its goal in time
-(mission): blocked, a pedestrian in its lane, a queue that will move, held up behind slower traffic (excuses), or
-it stayed behind a stationary body with a lawful lane free (the ego's, decided).
+(mission): blocked, a pedestrian in its lane, a queue that will move, held up behind slower traffic it could not pass
+(excuses), or it stayed behind a stationary body, or trailed slower traffic, with a lawful lane free (the ego's,
+decided).
 
 A mixin of :class:`drivefuzz.triage.attribute._Event` (rule 6 of :mod:`drivefuzz.triage.attribute`, whose docstring
 gives the order and which of these excuses the careful driver's replay tests): it reads the event's ``trace``,
@@ -14,7 +15,7 @@ from __future__ import annotations
 
 from typing import Mapping
 
-from drivefuzz.triage.evidence import actor_track, blocked_lanes, held_up, never_moved
+from drivefuzz.triage.evidence import actor_track, blocked_lanes, held_up, never_moved, passing_lanes
 from drivefuzz.triage.verdict import KEPT, Attribution
 
 #: [m] room a driver needs past a stationary body to merge back into a lane that leads on along the route.
@@ -87,6 +88,16 @@ class StandstillRules:
             held = held_up(trace, f)
             if self.mb.kind == "timeout" and held is not None:
                 share, leader = held
+                # slower traffic with a lawful lane free beside it (free of slower traffic too, and leading on): not
+                # passing it is the ego's, decided, as staying behind a stationary body is (the careful driver does
+                # not overtake either, so its replay would say nothing)
+                limit = float(trace["speed_limit"][f])
+                free = passing_lanes(trace, self.rmap, f, 0.8 * limit)
+                free = self._leading_on(free, {}, self._leads()) if free else []
+                if free:
+                    return self.ego("trailed", f"the ego trailed slower traffic ({leader}) for {share:.0%} of the run "
+                                    f"although {_were_free(free)}", decided=True, held_share=share, leader=leader,
+                                    free_lanes=free)
                 # kept without a replay: a replay would test the leader, not the ego (a scripted leader slows when the
                 # ego follows within a headway, tests/data/crawling_leader_on_the_ring: a careful driver 2 s back
                 # never sets it off)

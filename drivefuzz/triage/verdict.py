@@ -37,6 +37,7 @@ RULES: dict[str, str] = {
     "slow": "it did not reach its goal in time",
     "no_blocker": "it stood still with nothing in its way",
     "stayed_behind": "it stayed behind a stationary body with a lane free",
+    "trailed": "it trailed slower traffic to a time-out with a lane free to pass",
     "stood_still": "it stood still with a lane free",
     "stood_in_lane": "it stood reaching into another's lane, in its way",
     # an excuse that the careful driver's replay overturned (:data:`AVOIDED`): the ego's
