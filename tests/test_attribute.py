@@ -274,7 +274,7 @@ def test_a_car_that_waits_for_a_body_ahead_of_it_heads_a_queue(front, queue):
     mid-lane. Alone it blocks the ego (no queue); with a pedestrian standing 3 m ahead of it, or a car moving
     off there, it waits: a queue that will move."""
     from drivefuzz.sim.trace import trace_from_arrays
-    from drivefuzz.triage.evidence import blocked_lanes
+    from drivefuzz.triage.blockage import blocked_lanes
 
     n = 200
     ego = {"x": np.full(n, 45.9), "y": np.full(n, -4.8), "heading": np.zeros(n), "speed": np.zeros(n),
@@ -1035,7 +1035,7 @@ def test_a_leader_at_walking_pace_on_the_ring_held_the_ego_up(tmp_path):
     timed out 21 m short of its goal. held_up looked along the ego's arc only above 1 m/s, so at a crawl it
     looked straight ahead, 1.3 m beside v0 in the bend: the verdict was 'the ego did not reach its goal in
     time' (ego). It was held up behind slower traffic it could not pass."""
-    from drivefuzz.triage.evidence import held_up
+    from drivefuzz.triage.blockage import held_up
 
     net = Path(NET).with_name("roundabout.net.xml")
     sc, ex = kept_case(tmp_path, "crawling_leader_on_the_ring", str(net))

@@ -203,7 +203,7 @@ def test_trailing_slower_traffic_to_a_time_out_with_a_lane_free_is_the_egos(tmp_
     cannot pass holds up any driver behind it'); but it could pass, and not passing is the ego's, decided, as staying
     behind a stationary body with a lane free is (the careful driver does not overtake either: its replay would say
     nothing). The held_up excuse stays for a leader it cannot pass (test_held_up_is_kept_without_a_replay_...)."""
-    from drivefuzz.triage.evidence import held_up
+    from drivefuzz.triage.blockage import held_up
 
     m, old, new, _sc, ex = rejudge.judge_case(DATA / "trailed_a_crawler_with_a_lane_free", tmp_path)
     assert (m.oracle, m.kind) == ("mission", "timeout") and m.details["speed"] > 0.5

@@ -514,7 +514,7 @@ class _Event(StandstillRules):
         if closest > 0.0:
             self.base.update(ev)
             return None
-        how = (f"moved into the ego's lane alongside it" if gap0 < 0.0 else
+        how = ("moved into the ego's lane alongside it" if gap0 < 0.0 else
                f"cut into the ego's lane from {gap0:.1f} m ahead (moving over from {float(trace['t'][k]):.1f} s)")
         return self.other("cut_in", f"the vehicle {oth.id} {how}; braking {CAREFUL_REACTION:.2f} s later at {decel:.1f} "
                           f"m/s^2, a careful driver could not have kept clear of it", **ev)

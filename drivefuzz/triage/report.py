@@ -157,8 +157,6 @@ def _seconds(s: float | None) -> str:
 # ----------------------------------------------------------------------- a card
 def make_card(out: Path, row: FindingRow, plt, animate: bool = True) -> Card:
     """The pictures of one finding folder (notes where a piece is missing)."""
-    import json
-
     from drivefuzz.scenario.roadmap import load_roadmap
     from drivefuzz.scenario.sumofiles import read_scenario
     from drivefuzz.sim.trace import Trace
@@ -202,8 +200,6 @@ def make_card(out: Path, row: FindingRow, plt, animate: bool = True) -> Card:
 
 def _ads_summary(folder: Path, misbehavior: dict[str, Any]):
     """The ADS's record of its decisions (``trace/meta.json``'s ``ads_info``) up to the event, or None."""
-    import json
-
     from drivefuzz.triage.ads_info import summarize
 
     try:

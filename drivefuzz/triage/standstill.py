@@ -15,7 +15,8 @@ from __future__ import annotations
 
 from typing import Mapping
 
-from drivefuzz.triage.evidence import actor_track, blocked_lanes, held_up, never_moved, passing_lanes
+from drivefuzz.triage.blockage import blocked_lanes, held_up, never_moved, passing_lanes
+from drivefuzz.triage.evidence import actor_track
 from drivefuzz.triage.verdict import KEPT, Attribution
 
 #: [m] room a driver needs past a stationary body to merge back into a lane that leads on along the route.
