@@ -69,13 +69,15 @@ def test_a_job_never_runs_a_mutant_whose_effect_it_has_run(tmp_path, town_seeds)
 
 
 # ------------------------------------------------------------------ aiming
-def test_a_cell_is_drawn_from_each_projection_in_turn_and_deterministically():
+def test_a_cell_is_drawn_uniformly_and_deterministically():
+    # a projection with few unreached cells left gets few aims (drawn by projection first, the last speed x
+    # condition cells of a town job took a third of the aims while dozens of party cells waited)
     cells = ["party-element:vehicle/ahead|edge", "party-manoeuvre:vehicle/ahead|brake",
              "party-manoeuvre:vehicle/behind|brake", "speed-condition:0-10 km/h|fog"]
-    picks = [pick_cell(cells, random.Random(k)) for k in range(60)]
-    assert picks == [pick_cell(cells, random.Random(k)) for k in range(60)]
-    share = sum(p.startswith("party-element") for p in picks) / len(picks)
-    assert 0.2 < share < 0.5  # one of three projections, though it has one cell of four
+    picks = [pick_cell(cells, random.Random(k)) for k in range(400)]
+    assert picks == [pick_cell(cells, random.Random(k)) for k in range(400)]
+    share = sum(p.startswith("party-manoeuvre") for p in picks) / len(picks)
+    assert 0.4 < share < 0.6  # two cells of four
     assert pick_cell([], random.Random(0)) is None
 
 

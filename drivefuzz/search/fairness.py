@@ -26,6 +26,10 @@ no driver could get out of. After every placement, position, timing or speed cha
   change whose real closing speed needs more); a program's vehicle that starts on a lane beside the ego's is
   not a follower of the ego, and one that appears ahead of it later needs room only for the speed the ego
   must shed, not for a full stop;
+- **nobody enters within reach** (:func:`inserted_within_reach`): a vehicle (or a jaywalker) that departs later
+  does not enter where it and the ego, as the ego is expected to be then, would close their gap within a
+  reaction time (SUMO would insert it beside or behind the ego, and it strikes the ego before any driver could
+  react);
 - **obstacles are not at the start**: an immobile actor stands at least ``MutationConfig.immobile_min_range``
   metres ahead of the ego's start along its route (or behind it);
 - **obstacles leave a way on**: an immobile vehicle on the ego's route (or a walker standing or walking on a
@@ -61,6 +65,8 @@ MERGE_ROOM = 20.0  # [m] past an obstacle, to merge back into the only lane that
 JUNCTION_EXIT = 15.0  # [m] the first metres of an edge after a junction: no obstacle there
 QUEUE_CARS = 3  # cars that may queue behind an obstacle beyond the goal on a road of one lane
 SUMO_MIN_GAP = 2.5  # [m] SUMO's default minGap between queued cars
+INSERT_MARGIN = 1.0  # [m] left between a vehicle entering later and the ego, beyond a reaction's closing
+WALKER_RADIUS = 0.5  # [m] a walker's body, for the same rule
 
 
 def stopping_distance(speed: float, decel: float, reaction: float = 0.0) -> float:
@@ -88,7 +94,7 @@ def _ego_at(mut: "Mutator", sc: Scenario, t: float) -> tuple[float, float]:
     s, ts = mut._ego_profile(sc)
     d = float(np.interp(t, ts, s))
     j = int(np.clip(np.searchsorted(ts, t), 1, len(ts) - 1))
-    v = (s[j] - s[j - 1]) / max(ts[j] - ts[j - 1], 1e-6)
+    v = 1.0 / max(ts[j] - ts[j - 1], 1e-6)  # each step of the profile is 1 m driven
     return d, float(v)
 
 
@@ -98,9 +104,9 @@ def unfair(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
     if actor.kind is ActorKind.PEDESTRIAN:
         if actor.nav is NavType.LINEAR:
             why = walks_along_lane(mut, actor)
-            if why or d is None:
-                return why
-            return _jaywalker(mut, sc, actor, d) or walks_into_stopped_ego(mut, sc, actor, d)
+            if not why and d is not None:
+                why = _jaywalker(mut, sc, actor, d) or walks_into_stopped_ego(mut, sc, actor, d)
+            return why or inserted_within_reach(mut, sc, actor)
         if actor.nav is NavType.IMMOBILE and d is not None and 0.0 <= d < mut.cfg.immobile_min_range:
             return f"stands {d:.1f} m ahead of the ego's start"
         if actor.nav in (NavType.IMMOBILE, NavType.AUTOPILOT) and d is not None and d > 0.0 \
@@ -111,6 +117,9 @@ def unfair(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
         why = _program_unfair(mut, actor)
         if why:
             return why
+    why = inserted_within_reach(mut, sc, actor)
+    if why:
+        return why
     if d is None:
         return None
     if actor.nav is NavType.IMMOBILE and actor.depart <= 0.0 and 0.0 <= d < mut.cfg.immobile_min_range:
@@ -146,6 +155,50 @@ def unfair(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
         if gap_ahead < need:
             return (f"{gap_ahead:.1f} m ahead of the ego at the start, which enters {shed:.1f} m/s faster, "
                     f"it needs {need:.1f} m")
+    return None
+
+
+def _ego_pose(mut: "Mutator", sc: Scenario, front: float) -> tuple[float, float, float] | None:
+    """(x, y [m], heading [rad ENU]) of the ego's centre when its front bumper is ``front`` m along its route
+    (None: beyond the route's end)."""
+    route = mut._route(sc)
+    pos = sc.mission.start_pos + front - EGO_LENGTH / 2.0
+    for i, e in enumerate(route):
+        length = mut.rmap.edge(e).getLength()
+        if pos <= length:
+            g = mut.rmap.geom(mut.ego_lane(sc, i))
+            return g.position(min(max(pos, 0.0), g.length))
+        pos -= length
+    return None
+
+
+def inserted_within_reach(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
+    """A vehicle that departs later must not enter the simulation within reach of the ego: where the ego is
+    expected to be at its departure (the mutator's profile), the bodies must be further apart than the two
+    close in one reaction time (:data:`REACTION`, at their relative velocity) plus :data:`INSERT_MARGIN`. SUMO
+    inserts such a car beside or behind the ego (on the lane beside, on a road entering a junction the ego is
+    crossing) and it strikes the ego within a second: triage then excuses the ego (the attribution rule
+    ``appeared``) and the execution was spent on nothing. The same holds for a jaywalker (a linear walker, who
+    ignores everyone) stepping off the pavement beside the passing ego; other walkers keep to the pavement."""
+    walker = actor.kind is ActorKind.PEDESTRIAN
+    if actor.depart <= 0.0 or (walker and actor.nav is not NavType.LINEAR):
+        return None
+    front, v_ego = _ego_at(mut, sc, actor.depart)
+    ego = _ego_pose(mut, sc, front)
+    if ego is None:
+        return None
+    g = mut.rmap.geom(actor.start_lane)
+    half = WALKER_RADIUS if walker else VEHICLE_LENGTH / 2.0
+    x, y, h = g.position(min(max(actor.start_pos - (0.0 if walker else half), 0.0), g.length))
+    if walker and actor.dest_xy is not None:
+        h = math.atan2(actor.dest_xy[1] - y, actor.dest_xy[0] - x)
+    v = actor.speed if actor.nav is not NavType.IMMOBILE else 0.0
+    v_rel = math.hypot(v * math.cos(h) - v_ego * math.cos(ego[2]), v * math.sin(h) - v_ego * math.sin(ego[2]))
+    gap = math.hypot(x - ego[0], y - ego[1]) - EGO_LENGTH / 2.0 - half
+    need = v_rel * REACTION + INSERT_MARGIN
+    if gap < need:
+        return (f"enters {gap:.1f} m from the ego's body at {actor.depart:.1f} s, closing at {v_rel:.1f} m/s: "
+                f"it needs {need:.1f} m")
     return None
 
 

@@ -11,14 +11,22 @@ from __future__ import annotations
 
 import math
 import random
+from functools import partial
 
 import numpy as np
 from shapely.geometry import LineString, Point
 
 from drivefuzz.scenario import Scenario
 from drivefuzz.scenario.roadmap import PASSENGER
-from drivefuzz.scenario.signals import shiftable
+from drivefuzz.scenario.signals import shiftable, signal_state
 from drivefuzz.search.fairness import lane_limit
+
+#: [m] of route distance per metre driven inside a junction. The mutator measures the ego's route by its edges
+#: (:meth:`RoadMap.route_length`); the ego's profile gives the metres in junctions their time but (almost) no
+#: distance, so that a place x m into a junction is at its incoming edge's end + ``JUNCTION_M * x``.
+JUNCTION_M = 1e-6
+#: [m/s^2] a light that turns yellow when the ego is nearer than it stops in at this is passed (ego/ads.py)
+LIGHT_STOP_DECEL = 4.0
 
 
 class RoutePlacement:
@@ -39,23 +47,37 @@ class RoutePlacement:
 
         A speed cap per metre (``ego_speed_share`` of the limit; in junctions also ``sqrt(ego_lat_accel /
         curvature)``), then a forward pass accelerating at ``ego_accel`` and a backward pass braking at
-        ``ego_decel``: how the reference ADS drives an empty road. Used only to time linear actors."""
+        ``ego_decel``: how the reference ADS drives an empty road. At a fixed-time light (with the scenario's
+        signal shifts) that shows its link red or yellow as it arrives, it stops at the line and waits for green
+        (without this, every place past a red light was timed up to a cycle early: 37 s on town's seed 006).
+
+        The distance is counted as the mutator counts it everywhere else (:meth:`RoadMap.route_length`, the
+        route's edge lengths): the metres driven inside junctions take their time but add nothing to it. (They
+        used to add to it, so every actor timed by this profile for a place past a junction arrived early by the
+        time the ego spends in the junctions before it: 1-2 s per junction on town, 15-20 m each.) Each step is
+        one metre driven: the speed at a step is 1 m over its time."""
         m = sc.mission
-        key = (m.start_lane, m.start_pos, m.goal_edge, m.start_speed)
+        key = (m.start_lane, m.start_pos, m.goal_edge, m.start_speed, tuple((x.tls, x.shift) for x in sc.signals))
         if key in self._profile_cache:
             return self._profile_cache[key]
         cfg, rmap, route = self.cfg, self.rmap, self._route(sc)
         caps: list[np.ndarray] = []
         lane = m.start_lane
         index = rmap.lane(lane).getIndex()
+        ds: list[np.ndarray] = []  # per step, the route distance it adds (an edge's metres; ~0 in a junction)
+        lights: list[tuple[int, str, int]] = []  # (step index of the stop line, tls, the ego's link index)
         for i, e in enumerate(route):
             length = rmap.edge(e).getLength() - (m.start_pos if i == 0 else 0.0)
             caps.append(np.full(max(int(length), 1), cfg.ego_speed_share * rmap.edge(e).getSpeed()))
+            ds.append(np.full(len(caps[-1]), max(length, 0.0) / len(caps[-1])))
             if i + 1 < len(route):
                 conns = rmap.connections(e, route[i + 1])
                 if not conns:
                     continue
                 fl, _tl, via = min(conns, key=lambda c: abs(rmap.lane(c[0]).getIndex() - index))
+                conn = next((c for c in rmap.lane(fl).getOutgoing() if c.getToLane().getID() == _tl), None)
+                if conn is not None and conn.getTLSID() and shiftable(str(rmap.path), conn.getTLSID()) is not None:
+                    lights.append((sum(len(c) for c in caps), conn.getTLSID(), conn.getTLLinkIndex()))
                 chain = self._internal_chain(via)
                 length = sum(rmap.geom(lid).length for lid in chain)
                 pts = np.vstack([rmap.geom(fl).pts[-2:]] + [rmap.geom(lid).pts for lid in chain]
@@ -66,17 +88,62 @@ class RoutePlacement:
                 if k > 1e-4:
                     v = min(v, math.sqrt(cfg.ego_lat_accel / k))
                 caps.append(np.full(max(int(round(length)), 1), v))
+                ds.append(np.full(len(caps[-1]), JUNCTION_M))
         cap = np.maximum(np.concatenate(caps), 0.5)
-        v = np.empty(len(cap) + 1)
-        v[0] = min(m.start_speed, cap[0])
-        for j in range(len(cap)):  # forward: accelerate
-            v[j + 1] = min(cap[j], math.sqrt(v[j] ** 2 + 2 * cfg.ego_accel))
-        for j in range(len(cap) - 1, -1, -1):  # backward: brake ahead of slow parts
-            v[j] = min(v[j], math.sqrt(v[j + 1] ** 2 + 2 * cfg.ego_decel))
-        dt = 2.0 / np.maximum(v[:-1] + v[1:], 1e-3)  # 1 m at the mean speed
-        prof = (np.arange(len(cap) + 1, dtype=float), np.concatenate([[0.0], np.cumsum(dt)]))
+        s_route = np.concatenate([[0.0], np.cumsum(np.concatenate(ds))])
+        shifts = {x.tls: x.shift for x in sc.signals}
+        stops: dict[int, float] = {}  # step index of a stop line -> [s] waited there for green
+        t = self._profile_times(cap, m.start_speed, stops)
+        for j, tls, link in lights:  # in route order: a red one delays every later arrival
+            stops[j] = 0.0
+            del stops[j]
+            t = self._profile_times(cap, m.start_speed, stops)
+            wait = self._red_wait(t, j, partial(signal_state, str(rmap.path), tls, link, shift=shifts.get(tls, 0.0)))
+            if wait is not None:
+                stops[j] = 0.0
+                t = self._profile_times(cap, m.start_speed, stops)  # it brakes to the line: arrives later
+                stops[j] = self._red_wait(t, j, partial(signal_state, str(rmap.path), tls, link,
+                                                        shift=shifts.get(tls, 0.0)), stopping=True) or 0.0
+                t = self._profile_times(cap, m.start_speed, stops)
+        prof = (s_route, t)
         self._profile_cache[key] = prof
         return prof
+
+    @staticmethod
+    def _red_wait(t: np.ndarray, j: int, state, stopping: bool = False) -> float | None:
+        """[s] the ego waits at the stop line at step ``j`` of a profile with the times ``t``, where ``state(time)``
+        is its link's state; None where it drives on: the light is green as it arrives, or it turned yellow when
+        the ego was too near to stop at :data:`LIGHT_STOP_DECEL` (it goes, as the reference ADS does). With
+        ``stopping``, ``t`` already brakes to the line: only the wait for green is asked."""
+        t_arr = float(t[j])
+        if not stopping:
+            if state(t_arr) in (None, "g", "G", "o", "O"):
+                return None
+            # when the light turned from green (at most a cycle before), was the ego far enough to stop?
+            t_y = next((t_arr - 0.5 * q for q in range(1, 400) if state(t_arr - 0.5 * q) in ("g", "G")), None)
+            if t_y is not None and t_y > 0.0:
+                k = int(np.clip(np.searchsorted(t, t_y), 0, len(t) - 2))
+                v = 1.0 / max(float(t[k + 1] - t[k]), 1e-6)  # each step is 1 m driven
+                if j - k < v * v / (2 * LIGHT_STOP_DECEL):
+                    return None
+            return 0.0
+        return next((0.5 * q for q in range(0, 400) if state(t_arr + 0.5 * q) in ("g", "G")), 0.0)
+
+    def _profile_times(self, cap: np.ndarray, v0: float, stops: dict[int, float]) -> np.ndarray:
+        """[s] at each step of a profile with the speed caps ``cap`` (one per metre), starting at ``v0`` [m/s],
+        stopping at the step indices of ``stops`` and waiting there as long as each says."""
+        cfg = self.cfg
+        v = np.empty(len(cap) + 1)
+        v[0] = min(v0, cap[0])
+        for j in range(len(cap)):  # forward: accelerate (from a standstill after a stop)
+            v[j + 1] = 0.0 if j + 1 in stops else min(cap[j], math.sqrt(v[j] ** 2 + 2 * cfg.ego_accel))
+        for j in range(len(cap) - 1, -1, -1):  # backward: brake ahead of slow parts and stops
+            v[j] = min(v[j], math.sqrt(v[j + 1] ** 2 + 2 * cfg.ego_decel))
+        dt = 2.0 / np.maximum(v[:-1] + v[1:], 1e-3)  # 1 m at the mean speed
+        for j, wait in stops.items():
+            if 0 < j <= len(dt):
+                dt[j - 1] += wait
+        return np.concatenate([[0.0], np.cumsum(dt)])
 
     def _ego_eta(self, sc: Scenario, dist: float) -> float:
         """[s] until the ego's front bumper is expected ``dist`` metres along its route."""
@@ -183,6 +250,7 @@ class RoutePlacement:
             fl, tl, via = min(conns, key=lambda c: abs(rmap.lane(c[0]).getIndex() - ego_index))
             ego_state = next((c.getState() for c in rmap.lane(fl).getOutgoing() if c.getToLane().getID() == tl), "")
             ego_line = self._passage(fl, tl, via)
+            via_len = sum(rmap.geom(lid).length for lid in self._internal_chain(via))
             ego_zone = ego_line.buffer(2.0)  # closer centre lines than this: the bodies meet
             node = rmap.edge(e).getToNode()
             for inc in node.getIncoming():
@@ -201,7 +269,8 @@ class RoutePlacement:
                             continue
                         d_actor = min(line.project(Point(xy)) for xy in _coords(hit))
                         pt = line.interpolate(d_actor)
-                        out.append((i, s + ego_line.project(pt), lane.getID(), to.getEdge().getID(), d_actor,
+                        out.append((i, s + _into_junction(ego_line.project(pt), via_len), lane.getID(),
+                                    to.getEdge().getID(), d_actor,
                                     node.getID(), ego_state, c.getState()))
         self._conflict_cache[key] = out
         return out
@@ -223,7 +292,6 @@ class RoutePlacement:
                 continue
             if conn.getTLSID() and shiftable(str(rmap.path), conn.getTLSID()) is not None and s > 0:
                 out.append((s, conn.getTLSID(), conn.getTLLinkIndex()))
-            s += self._via_length(fl, conn.getToLane().getID())
         return out
 
     def _cross_place(self, sc: Scenario, rng: random.Random, speed: float):
@@ -253,6 +321,12 @@ class RoutePlacement:
         if not actor_route or rmap.lane(lane_id).getEdge().getID() not in actor_route:
             return None
         return lane, pos, speed, dest, f", crosses the ego's path at {node} at ~{t_meet:.1f} s"
+
+
+def _into_junction(x: float, via_len: float) -> float:
+    """[m] route distance from a junction's entry to a point ``x`` m along the ego's passage through it (the
+    junction's ``via_len`` m, then the next edge)."""
+    return JUNCTION_M * min(x, via_len) + max(x - via_len, 0.0)
 
 
 def _coords(geom) -> list[tuple[float, float]]:

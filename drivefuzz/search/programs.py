@@ -27,6 +27,8 @@ from __future__ import annotations
 
 import random
 
+import numpy as np
+
 from drivefuzz.scenario import Actor, ActorKind, Maneuver, ManeuverAction, NavType, Scenario, Trigger
 from drivefuzz.scenario.roadmap import PASSENGER
 from drivefuzz.scenario.model import cut_in_gap
@@ -65,8 +67,8 @@ def _leader_speed(mut: Mutator, lane_id: str, rng: random.Random, lo: float, hi:
 def _ego_speed(mut: Mutator, sc: Scenario, dist: float) -> float:
     """[m/s] the ego's expected speed ``dist`` m along its route (the mutator's profile of the empty road)."""
     s, t = mut._ego_profile(sc)
-    j = min(max(int(dist), 0), len(s) - 2)
-    return float((s[j + 1] - s[j]) / max(t[j + 1] - t[j], 1e-6))
+    j = min(max(int(np.searchsorted(s, dist)), 0), len(s) - 2)
+    return float(1.0 / max(t[j + 1] - t[j], 1e-6))  # each step of the profile is 1 m driven
 
 
 def _place(mut: Mutator, sc: Scenario, rng: random.Random, lo: float, hi: float, rel: float,

@@ -1,0 +1,229 @@
+"""Where and when an aimed encounter should happen: the place on the ego's route that a cell's column asks for.
+
+:mod:`drivefuzz.search.aim` builds a component for an unreached interaction-coverage cell. The cell's row says
+who the other party is; its column says where or while doing what the ego meets it. :func:`meeting` turns the
+column into a place (a distance along the ego's route, as the mutator counts it) and, where the column asks
+for a light's phase, a shifted light:
+
+- a junction column (``signal/*``, ``priority``, ``yield``, ``turn_left``, ``turn_right``): the stop line of
+  one of the route's junctions with that control or turn; ``signal/amber`` shifts its light so that it turns
+  yellow as the ego arrives (it drives in on yellow), ``signal/red`` so that it turns yellow a few seconds
+  before (the ego stops and waits at red: what meets it there meets it at a red light);
+- a manoeuvre column, read from the mutator's profile of the ego (:meth:`Mutator._ego_profile`, which waits at
+  red lights): ``stop_go`` where the ego is expected to stand (a red light; else a light is shifted to red; else
+  its start), ``accelerate`` and ``brake`` where it is expected to speed up or slow down, ``cruise`` where it
+  holds its speed;
+- ``edge``: a place more than 35 m from every junction of the route.
+
+The builders that can be timed to a place take it (:func:`passes`, :func:`follower_at`); the others are kept
+only when their actor starts within 50 m before it. Never imports libsumo.
+"""
+
+from __future__ import annotations
+
+import random
+
+import numpy as np
+
+from drivefuzz.scenario import ActorKind, NavType, Scenario, SignalShift
+from drivefuzz.scenario.model import EGO_LENGTH
+from drivefuzz.scenario.signals import phase_starts, shiftable
+from drivefuzz.search import catalogue as cat
+from drivefuzz.search import programs as prog
+from drivefuzz.search.fairness import lane_limit
+from drivefuzz.search.mutate import Mutator
+
+#: [m] the element is ``edge`` only this far from a junction (coverage reads a junction within 30 m)
+EDGE_CLEAR_M = 35.0
+#: [m/s^2] the profile's acceleration above / below which the ego accelerates / brakes (coverage: 0.7, -1.0)
+ACCEL, BRAKE = 0.7, -1.0
+JUNCTION_COLUMNS = ("signal/green", "signal/amber", "signal/red", "priority", "yield", "turn_left", "turn_right")
+
+
+def meeting(mut: Mutator, sc: Scenario, col: str, rng: random.Random) -> tuple[Scenario, float | None, str]:
+    """(the scenario, with a light shifted where the column asks for its phase; the route distance [m] where the
+    encounter should happen, None when the column does not say or the route has no such place; what was done)."""
+    from drivefuzz.search.aim import _junction_spots, _marks
+
+    marks = _marks(mut, sc)
+    if col in JUNCTION_COLUMNS:
+        spots = _junction_spots(marks, col) or []
+        if not spots:
+            return sc, None, ""
+        at = rng.choice(spots)
+        if col in ("signal/amber", "signal/red"):
+            new, desc = shift_light(mut, sc, at, col, rng)
+            return (new, at, desc) if new is not None else (sc, None, "")
+        return sc, at, ""
+    if col == "edge":
+        goal = _goal(mut, sc)
+        junctions = [s for s, *_ in marks["junctions"]]
+        free = [d for d in np.arange(5.0, 0.8 * goal, 5.0) if all(abs(d - s) > EDGE_CLEAR_M for s in junctions)]
+        return sc, (float(rng.choice(free)) if free else None), ""
+    if col not in ("stop_go", "accelerate", "brake", "cruise"):
+        return sc, None, ""
+    spots = profile_spots(mut, sc, col)
+    if col == "stop_go" and not spots:  # nowhere to stand: a light of the route turns red as the ego comes
+        lights = [s for s, _, c, _, _ in marks["junctions"] if c == "signal"]
+        if lights:
+            at = rng.choice(lights)
+            new, desc = shift_light(mut, sc, at, "signal/red", rng)
+            if new is not None:
+                return new, at, desc
+        spots = [d for d in (5.0, 10.0, 15.0) if d < _goal(mut, sc)]  # its start
+    return sc, (float(rng.choice(spots)) if spots else None), ""
+
+
+def lane_change_spots(mut: Mutator, sc: Scenario) -> list[float]:
+    """Route distances [m] where the route makes the ego change lanes: the middle of each route edge on which no
+    lane the ego can enter by (its start lane, or one the previous junction leads into) leads on along the route."""
+    rmap, route = mut.rmap, mut._route(sc)
+    out, s = [], -sc.mission.start_pos
+    for i, e in enumerate(route[:-1]):
+        length = rmap.edge(e).getLength()
+        entry = {sc.mission.start_lane} if i == 0 else {c[1] for c in rmap.connections(route[i - 1], e)}
+        leads = {c[0] for c in rmap.connections(e, route[i + 1])}
+        if entry and leads and not entry & leads:
+            out.append(max(s + 0.45 * length, 1.0))
+        s += length
+    return out
+
+
+def _goal(mut: Mutator, sc: Scenario) -> float:
+    return mut.rmap.route_length(mut._route(sc), sc.mission.start_pos, sc.mission.goal_pos)
+
+
+def profile_spots(mut: Mutator, sc: Scenario, col: str) -> list[float]:
+    """Route distances [m] (every 5 m, before 0.8 of the route) where the ego's profile does what ``col`` says."""
+    s, t = mut._ego_profile(sc)
+    dt = np.maximum(np.diff(t), 1e-6)
+    v = 1.0 / dt  # each step is 1 m driven
+    a = np.diff(v, append=v[-1]) / dt
+    want = {"stop_go": v < 0.5, "accelerate": a > ACCEL, "brake": a < BRAKE,
+            "cruise": (np.abs(a) < 0.3) & (v > 3.0)}[col]
+    if col == "stop_go":  # a stop (a wait at a red light): the steps just before it count too
+        want = want | (np.concatenate([want[1:], [False]]))
+    goal = 0.8 * _goal(mut, sc)
+    picked = sorted({round(float(x) / 5.0) * 5.0 for x in s[:-1][want] if 1.0 <= x <= goal})
+    return picked
+
+
+def shift_light(mut: Mutator, sc: Scenario, at: float, col: str, rng: random.Random) -> tuple[Scenario | None, str]:
+    """``sc`` with the light of the route's junction at ``at`` shifted so that it turns yellow as the ego arrives
+    (``signal/amber``: 1 s after to 1.5 s before, so that the ego is too near to stop and drives in on yellow) or
+    several seconds before (``signal/red``: it stops and waits at red); (None, "") where it has no such light."""
+    light = next(((tls, link) for s, tls, link in mut._signals_ahead(sc) if abs(s - at) < 1.0), None)
+    if light is None:
+        return None, ""
+    tls, link = light
+    program = shiftable(str(mut.rmap.path), tls)
+    onsets = phase_starts(program, link, "yY")
+    if program is None or not onsets:
+        return None, ""
+    base = sc.model_copy(update={"signals": tuple(x for x in sc.signals if x.tls != tls)})
+    t_arrive = mut._ego_eta(base, max(at - 0.5, 0.0))
+    before = rng.uniform(-1.0, 1.5) if col == "signal/amber" else rng.uniform(4.0, 12.0)  # [s] yellow before it
+    shift = round((t_arrive - before - program.offset - rng.choice(onsets)) % program.cycle, 2)
+    new = base.model_copy(update={"signals": base.signals + (SignalShift(tls=tls, shift=shift),)})
+    what = "yellow" if col == "signal/amber" else "yellow, then red,"
+    return new, f"light {tls} turns {what} ~{before:.1f} s before the ego reaches it (shift {shift} s)"
+
+
+def passes(mut: Mutator, sc: Scenario, rng: random.Random, at: float | None = None):
+    """From behind on the lane beside, faster than the ego: it draws level with the ego's rear where the ego is
+    expected at ``at`` (else, in 7 of 10 draws the slowest of 8 places drawn along the route: a start, a turn, a
+    light, where the speed difference is large; else one of them) and passes close by on its own lane (lanes
+    of 3.2 m leave 1.4 m between the bodies): 2 s before the closest moment it is still behind the ego's rear,
+    in its rear quarter. (An overtaker that cuts in meets the ego ahead of it, after it has passed: no
+    rear-quarter encounter.) A maneuver vehicle without steps: SUMO drives it at its speed (at most 1.2 x the
+    lane's limit), stopping at lights and for what is ahead of it."""
+    goal = _goal(mut, sc)
+    if goal < 20.0:
+        return None
+    draws = [max(at - 0.5, 0.0)] if at is not None else sorted(rng.uniform(5.0, 0.8 * goal) for _ in range(8))
+    options = []
+    for d in draws:
+        spot = cat._route_spot(mut, sc, d)
+        if spot is not None and prog._beside(mut, spot[1]):
+            options.append((prog._ego_speed(mut, sc, d) / lane_limit(mut, spot[1]), d, spot))
+    if not options:
+        return None
+    _, d, (_, ego_lane, pos) = min(options) if rng.random() < 0.7 else rng.choice(options)
+    lane = rng.choice(prog._beside(mut, ego_lane))
+    v_ego = prog._ego_speed(mut, sc, d)
+    speed = round(min(prog.SPEED_SHARE[1] * lane_limit(mut, lane.getID()), v_ego + rng.uniform(4.0, 9.0)), 2)
+    lead = rng.uniform(3.0, 7.0)  # [s] it drives before it draws level
+    t_level = mut._ego_eta(sc, max(d - 0.5, 0.0)) + (rng.uniform(0.0, 4.0) if v_ego < 1.0 else 0.0)
+    start = min(pos, lane.getLength() - 0.5) - EGO_LENGTH - speed * lead  # its front at the ego's rear
+    depart = t_level - lead
+    if depart < 0.0:  # it would have to start earlier: from the start, further on
+        start, depart = start - speed * depart, 0.0
+    if start < 1.0:
+        return None
+    a = prog._vehicle(mut, sc, lane, round(start, 2), speed, round(depart, 1), [])
+    return [a], [], {}, (f"{a.id} passes the ego from behind on {lane.getID()} at {speed:.1f} m/s, level with it "
+                         f"at {pos:.0f} m ({t_level:.1f} s)")
+
+
+def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
+    """A vehicle on the ego's lane behind the place ``at`` that reaches the ego's rear as the ego gets there: where
+    the ego is expected to stand there (a red light, say), a lawful car arriving 0.5-4 s after it; where it is
+    expected to move, a car 3-6 m/s faster (at most 1.2 x the limit: a maneuver vehicle without steps, which
+    SUMO drives at that speed behind the ego and brakes as it closes in). Either closes in from behind."""
+    spot = cat._route_spot(mut, sc, max(at - 0.5, 0.0))
+    if spot is None:
+        return None
+    _, lane, pos = spot
+    limit = lane_limit(mut, lane)
+    v_ego = prog._ego_speed(mut, sc, max(at - 0.5, 0.0))
+    t_meet = mut._ego_eta(sc, max(at - 0.5, 0.0))
+    if v_ego < 1.0:
+        nav, speed, lead = NavType.AUTOPILOT, round(limit * rng.uniform(0.8, 1.05), 2), rng.uniform(3.0, 6.0)
+        t_meet += rng.uniform(0.5, 4.0)
+    else:
+        nav, lead = NavType.MANEUVER, rng.uniform(4.0, 8.0)
+        speed = round(min(prog.SPEED_SHARE[1] * limit, v_ego + rng.uniform(3.0, 6.0)), 2)
+    start = pos - EGO_LENGTH - 2.0 - speed * lead
+    depart = t_meet - lead
+    if depart < 0.0:
+        start, depart = start - speed * depart, 0.0
+    if start < 1.0:
+        return None
+    a = cat.Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=nav, start_lane=lane, start_pos=round(start, 2),
+                  speed=speed, depart=round(depart, 1), dest_edge=cat._dest(mut, sc))
+    return [a], [], {}, f"{a.id} comes up behind the ego on {lane} at {speed:.1f} m/s, reaching it at ~{t_meet:.1f} s"
+
+
+def walker_from_left(mut: Mutator, sc: Scenario, rng: random.Random, early=(-1.0, 1.5)):
+    """A walker crossing the ego's road from its left: the catalogue's crossing walker (who starts on the
+    pavement of the ego's own edge, on its right where traffic keeps right) mirrored: it starts on the pavement
+    of the road the other way and walks to that spot, leaving earlier by the time it takes to cross the other
+    carriageway. The fairness rule for jaywalkers is applied here (the shared check cannot place a walker
+    whose pavement is off the ego's route): it steps onto the road while the ego can still stop."""
+    from drivefuzz.search import fairness
+
+    built = cat.walker_crosses(mut, sc, rng, early=early)
+    if built is None:
+        return None
+    a = built[0][0]
+    lane = mut.rmap.lane(a.start_lane)
+    edge = lane.getEdge()
+    x0, y0, _ = mut.rmap.geom(a.start_lane).position(a.start_pos)
+    for other in edge.getToNode().getOutgoing():
+        if other.getToNode() != edge.getFromNode() or not mut.rmap.is_normal_edge(other):
+            continue
+        walks = [ln for ln in other.getLanes() if ln.allows("pedestrian") and not ln.allows("passenger")]
+        road = sum(ln.getWidth() for ln in other.getLanes() if ln.allows("passenger"))
+        for sw in walks:
+            pos, _ = mut.rmap.geom(sw.getID()).project(*a.dest_xy)
+            if not 1.0 <= pos <= sw.getLength() - 0.5:
+                continue
+            new = a.model_copy(update={"start_lane": sw.getID(), "start_pos": round(pos, 2),
+                                       "depart": round(max(a.depart - road / max(a.speed, 0.1), 0.0), 1),
+                                       "dest_xy": (round(x0, 2), round(y0, 2))})
+            d = fairness.route_distance(mut, sc, a.start_lane, a.start_pos)
+            if d is None or fairness.walks_along_lane(mut, new) or fairness._jaywalker(mut, sc, new, d) \
+                    or fairness.walks_into_stopped_ego(mut, sc, new, d):
+                return None
+            return [new], [], {}, f"{new.id} crosses from the left from {sw.getID()} @ {pos:.1f} m, leaving at {new.depart} s"
+    return None

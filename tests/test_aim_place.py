@@ -1,0 +1,148 @@
+"""Aiming at a place: the ego's profile times it past junctions and red lights, the timed builders meet it where
+and from where the cell wants, and no vehicle enters the simulation within reach of the ego."""
+
+from __future__ import annotations
+
+import math
+import random
+
+import numpy as np
+import pytest
+
+from drivefuzz.scenario import Actor, ActorKind, NavType
+from drivefuzz.scenario.roadmap import load_roadmap
+from drivefuzz.scenario.seed import list_seeds
+from drivefuzz.scenario.sumofiles import read_scenario
+from drivefuzz.search.aim_place import follower_at, meeting, passes, profile_spots, shift_light, walker_from_left
+from drivefuzz.search.fairness import inserted_within_reach, unfair
+from drivefuzz.search.mutate import Mutator
+from drivefuzz.search.risk import risk_score
+from drivefuzz.sim.execute import execute
+from drivefuzz.triage.coverage import classify, close_encounters
+
+from conftest import ROOT
+
+
+@pytest.fixture(scope="module")
+def town_seeds():
+    return [read_scenario(p) for p in list_seeds(ROOT / "seeds" / "town")]
+
+
+@pytest.fixture(scope="module")
+def mut(town_seeds):
+    return Mutator(load_roadmap(town_seeds[0].network_path()))
+
+
+def test_the_profile_times_the_ego_past_junctions_and_red_lights(mut, town_seeds):
+    """Where the clean reference ADS enters each route edge after the first, against the profile's time. Before,
+    the profile counted the metres inside junctions as route distance (the mutator's places do not) and never
+    stopped at red lights: seed 006 reached its second edge 37 s later than the profile said."""
+    errors = []
+    for sc in town_seeds:
+        trace = execute(sc).trace
+        lanes = np.array([str(x) for x in trace["lane"]])
+        route, d = mut._route(sc), -sc.mission.start_pos
+        for i, e in enumerate(route):
+            if i:
+                k = np.nonzero(np.char.startswith(lanes, e + "_"))[0]
+                if len(k):
+                    errors.append(float(trace["t"][k[0]]) - mut._ego_eta(sc, d + 0.5))
+            d += mut.rmap.edge(e).getLength()
+    errors = np.abs(errors)
+    assert len(errors) >= 15
+    assert errors.mean() < 1.5 and errors.max() < 5.0, errors.round(1)
+
+
+def test_a_light_shifted_for_red_makes_the_ego_wait_there(mut, town_seeds):
+    sc = next(s for s in town_seeds if mut._signals_ahead(s))
+    at = mut._signals_ahead(sc)[0][0]
+    new, desc = shift_light(mut, sc, at, "signal/red", random.Random(1))
+    assert new is not None and "red" in desc
+    # the profile expects it to stand at that line ...
+    assert any(abs(s - at) <= 5.0 for s in profile_spots(mut, new, "stop_go"))
+    # ... and the ego stands on the edge before it, at red
+    route, d = mut._route(new), -new.mission.start_pos
+    edge = next(e for e in route if abs((d := d + mut.rmap.edge(e).getLength()) - at) < 1.0)
+    trace = execute(new).trace
+    on = np.char.startswith(np.array([str(x) for x in trace["lane"]]), edge + "_")
+    red = np.array([str(s)[:1] in "rR" for s in trace["tls_state"]])
+    assert (on & (np.asarray(trace["speed"]) < 0.5) & red).any()
+
+
+def test_no_vehicle_enters_within_reach_of_the_ego(mut, town_seeds):
+    """A car that SUMO would insert on the lane beside the ego as the ego passes is refused; the same car
+    entering well ahead of it is not (the rule behind the attribution rule ``appeared``)."""
+    sc = town_seeds[0]
+    route = mut._route(sc)
+    lane0 = mut.ego_lane(sc, 0)
+    beside = next(ln for ln in mut.rmap.lane(lane0).getEdge().getLanes()
+                  if ln.allows("passenger") and ln.getID() != lane0)
+    t = 4.0
+    front = mut._ego_progress(sc, t) + sc.mission.start_pos  # the ego's front, as a lane position
+    car = Actor(id="v9", kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=beside.getID(),
+                start_pos=round(front, 2), speed=8.0, depart=t, dest_edge=route[-1])
+    why = inserted_within_reach(mut, sc, car)
+    assert why and "enters" in why
+    assert "enters" in (unfair(mut, sc, car) or "")
+    ahead = car.model_copy(update={"start_pos": round(min(front + 40.0, beside.getLength() - 1.0), 2)})
+    assert inserted_within_reach(mut, sc, ahead) is None
+    assert inserted_within_reach(mut, sc, car.model_copy(update={"depart": 0.0})) is None  # there from the start
+    # a jaywalker stepping off the pavement beside the passing ego (struck 0.65 s after it appeared, in two
+    # campaigns of this session: the attribution rule appeared excused the ego); a walker on the pavement is not
+    walk = next(ln for ln in mut.rmap.lane(lane0).getEdge().getLanes() if not ln.allows("passenger"))
+    side = front - 3.0  # beside the ego's body: the ego "has passed" its line, so the jaywalker rule lets it go
+    x, y, h = mut.rmap.geom(walk.getID()).position(side)
+    jay = Actor(id="p9", kind=ActorKind.PEDESTRIAN, nav=NavType.LINEAR, start_lane=walk.getID(),
+                start_pos=round(side, 2), speed=2.0, depart=t,
+                dest_xy=(round(x - 8.0 * math.sin(h), 2), round(y + 8.0 * math.cos(h), 2)))
+    assert "enters" in (unfair(mut, sc, jay) or "")
+    assert inserted_within_reach(mut, sc, jay.model_copy(update={"nav": NavType.AUTOPILOT, "dest_xy": None})) is None
+
+
+def test_a_passing_car_meets_the_ego_from_its_rear_quarter(mut, town_seeds):
+    """The rear quarters were reached by 1 of 12-15 aimed builds (an overtaker that cuts in is ahead of the ego
+    2 s before the encounter); a car that passes close by is behind the ego's rear then."""
+    met, built = 0, 0
+    for k, sc in enumerate(town_seeds):
+        b = passes(mut, sc, random.Random(k))
+        if b is None or unfair(mut, sc, b[0][0]):
+            continue
+        built += 1
+        new = sc.model_copy(update={"actors": sc.actors + tuple(b[0])})
+        ex = execute(new)
+        r = risk_score(ex.trace)
+        parties = {classify(new, ex.trace, mut.rmap, a, f).party for a, f in close_encounters(r) if a == b[0][0].id}
+        met += any(p.startswith("vehicle/rear_") for p in parties)
+    assert built >= 5
+    assert met >= 2, (met, built)
+
+
+def test_a_follower_is_timed_to_the_place_and_fair(mut, town_seeds):
+    sc = town_seeds[0]
+    new, at, _ = meeting(mut, sc, "signal/red", random.Random(3))
+    assert at is not None
+    for k in range(10):
+        b = follower_at(mut, new, random.Random(k), at)
+        if b is not None:
+            a = b[0][0]
+            assert a.start_lane.rsplit("_", 1)[0] in mut._route(new)
+            if unfair(mut, new, a) is None:
+                return
+    pytest.fail("no fair follower timed to the red light in 10 draws")
+
+
+def test_a_walker_from_the_left_starts_left_of_the_ego(mut, town_seeds):
+    built = 0
+    for k, sc in enumerate(town_seeds * 2):
+        b = walker_from_left(mut, sc, random.Random(k))
+        if b is None:
+            continue
+        a = b[0][0]
+        x, y, _ = mut.rmap.geom(a.start_lane).position(a.start_pos)
+        dx, dy = a.dest_xy[0] - x, a.dest_xy[1] - y
+        # it walks to a point on the ego's pavement: the ego's road lies to its right
+        i = [mut.rmap.lane(mut.ego_lane(sc, j)).getEdge().getID() for j in range(len(mut._route(sc)))]
+        assert mut.rmap.lane(a.start_lane).getEdge().getID() not in i  # the pavement of the road the other way
+        assert math.hypot(dx, dy) > 3.0
+        built += 1
+    assert built >= 4
