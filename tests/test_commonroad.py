@@ -237,6 +237,52 @@ def test_a_route_within_a_turn_goes_whole_and_a_loop_goes_as_a_window_the_frame_
         CoordinateSystem(loop[lo:hi], clcs_params=params)  # and accepts each window
 
 
+# -- the curvilinear frame: its heading turns as its curvature says ------------------------------------------------
+def _mission(seed: str):
+    from drivefuzz.scenario.roadmap import load_roadmap
+
+    sc = load_scenario(ROOT / "seeds" / seed)
+    m = sc.mission
+    rmap = load_roadmap(sc.network_path())
+    gx, gy, _ = rmap.geom(rmap.drive_lane(m.goal_edge)).position(m.goal_pos)
+    return MissionInfo(m.start_lane, m.start_pos, m.goal_edge, m.goal_pos, (gx, gy),
+                       rmap.route(m.start_edge, m.goal_edge), 0.05, sc.seed), rmap
+
+
+def test_the_frame_is_preprocessed_as_the_planners_own_helper_does_and_the_car_starts_from_rest_in_a_bend():
+    """The adapter's mistake 5 (docs/bugs/commonroad-reactive-planner.md): a frame on the resampled polyline turned
+    its heading in steps at SUMO's shape vertices (0.25 rad in one metre, 0.03 in the next) while its curvature
+    said 0.1-0.17 1/m; the planner's yaw-rate check reads the heading, so in the roundabout's entry bend no
+    moving sample passed and the car, once at rest there, never started again."""
+    from commonroad_dc.pycrcc import CollisionChecker
+
+    from adapters.commonroad.base import CarState
+
+    mission, rmap = _mission("roundabout/001")
+    # the car at rest in the entry bend (the closed-loop state where limitation 8 was read), the road wheels turned
+    at_rest = CarState(-1.8642, 32.2134, -1.6675, 0.0, 0.0, 0.0, -0.0943)
+    top, mismatch = {}, {}
+    for spline in (True, False):
+        ads = ReactivePlannerADS({"spline_frame": spline})
+        ads.reset(mission, rmap)
+        co = ads.planner.coordinate_system
+        pos, k = np.asarray(co.ref_pos), np.asarray(co.ref_curv)
+        turn = np.diff(np.unwrap(np.asarray(co.ref_theta))) / np.diff(pos)
+        mismatch[spline] = float(np.max(np.abs(turn - (k[1:] + k[:-1]) / 2.0)))
+        plan = ads.plan(at_rest, CollisionChecker(), desired_speed=3.57)
+        top[spline] = None if plan is None else float(np.max(plan.v))
+    assert mismatch[True] < 0.03 < 0.1 < mismatch[False]  # [1/m]
+    assert top[True] is not None and top[True] > 2.0  # it starts
+    assert top[False] == 0.0  # the former frame: the planner's standstill trajectory
+
+
+def test_a_roundabout_seed_that_stopped_for_good_in_its_entry_bend_drives_clean():
+    sc = load_scenario(ROOT / "seeds" / "roundabout" / "000")
+    ex = execute(sc, ads=load_ads("commonroad-reactive"), oracles=OracleSettings().instantiate())
+    assert ex.termination.value == "goal_reached" and not ex.misbehaviors
+    assert ex.trace.meta["ads_info"]["counts"][NO_PLAN] == 0
+
+
 # -- the kept reproducers of docs/bugs/commonroad-reactive-planner.md ----------------------------------------------
 BUGS = ROOT / "docs" / "bugs" / "commonroad-reactive-planner"
 #: the reproducers that drive 13-23 s before the car stops (30-50 s each on a busy machine)

@@ -8,9 +8,12 @@ This subclass only sets it up and calls it; everything else is :class:`adapters.
 Set-up, as measured (issue 32): ``debug.multiproc`` off (with it each plan starts six processes
 and is 2.5x slower); the planner's constructor insists on a CommonRoad scenario, so it gets an
 empty one and a planning problem at the start; the reference path goes in as a coordinate
-system (``set_reference_path(reference_path=...)`` fails with commonroad-clcs 2025.x), resampled only
-(the base class has already opened its bends to what the car can turn; the frame's curve subdivision
-cut the interchange's tight left turns by 2.2 m, into the opposite lanes); the car is
+system (``set_reference_path(reference_path=...)`` fails with commonroad-clcs 2025.x), preprocessed as the
+planner's own ``create_coordinate_system`` does (a cubic smoothing spline, resampled 0.5-1 m apart: option
+``spline_frame``; resampled only, the frame's heading turned in steps at SUMO's shape vertices while its
+curvature did not, and at low speed in a bend the yaw-rate check refused every sample; the base class has
+already opened the bends to what the car can turn; the frame's curve subdivision cut the interchange's tight
+left turns by 2.2 m, into the opposite lanes); the car is
 drivefuzz's (wheelbase, 0.6 rad road-wheel angle, 0.8 rad/s steering rate, 9 m/s^2 braking and
 the power limit as CommonRoad's switching speed), not the default BMW 320i, whose steering rate
 rejects every sample of a 90-degree town turn. ``set_desired_velocity`` ignores the requested speed
@@ -41,7 +44,7 @@ from pydantic import Field
 with warnings.catch_warnings():  # commonroad-io's generated protobuf code and the route planner warn on import
     warnings.simplefilter("ignore", DeprecationWarning)
     from commonroad.common.util import Interval
-    from commonroad_clcs.config import CLCSParams, ProcessingOption
+    from commonroad_clcs.config import CLCSParams, ProcessingOption, ResamplingOption
     from commonroad_clcs.pycrccosy import (CurvilinearProjectionDomainLateralError,
                                            CurvilinearProjectionDomainLongitudinalError)
     from commonroad.planning.goal import GoalRegion
@@ -81,6 +84,20 @@ def planner_config(params: VehicleParams, dt: float, steps: int) -> ReactivePlan
     return config
 
 
+def frame_params(spline: bool) -> CLCSParams:
+    """The curvilinear frame's preprocessing: with ``spline``, the planner's own
+    (``commonroad_rp.utility.utils_coordinate_system.create_coordinate_system``'s defaults); else resampled only."""
+    if not spline:
+        return CLCSParams(processing_option=ProcessingOption.RESAMPLE)
+    params = CLCSParams(processing_option=ProcessingOption.SPLINE_SMOOTHING)
+    params.spline.degree_spline = 3
+    params.spline.smoothing_factor = 2.0
+    params.resampling.option = ResamplingOption.ADAPTIVE
+    params.resampling.min_step = 0.5
+    params.resampling.max_step = 1.0
+    return params
+
+
 class DomainAsNone(CoordinateSystem):
     """The planner's coordinate system, answering None (as the planner expects) where clcs 2025.x raises."""
 
@@ -112,6 +129,11 @@ class ReactivePlannerADS(CommonRoadADS):
         # problem's): true (default) passes a car at rest as moving at AT_REST m/s; false: as shipped, a car that
         # starts at rest stays there (bug 2)
         rest_fix: bool = True
+        # the curvilinear frame's reference path preprocessed as the planner's own create_coordinate_system does it
+        # (a cubic smoothing spline, then resampled 0.5-1 m apart): true (default); false: only resampled, as before
+        # issue 32's third session, when the heading of the adapter's polyline turned in steps at SUMO's shape
+        # vertices while its curvature did not, and low-speed samples failed the yaw-rate check (limitation 8)
+        spline_frame: bool = True
 
     def make_planner(self, reference: np.ndarray, params: VehicleParams) -> None:
         dt = self.options.planner_dt
@@ -132,7 +154,7 @@ class ReactivePlannerADS(CommonRoadADS):
         """A new curvilinear frame on ``reference`` (the planner's own set-up is kept)."""
         old = getattr(self.planner, "_co", None)
         cls = DomainAsNone if self.options.domain_shim else CoordinateSystem
-        co = cls(reference, clcs_params=CLCSParams(processing_option=ProcessingOption.RESAMPLE))
+        co = cls(reference, clcs_params=frame_params(self.options.spline_frame))
         self.caught_before += getattr(old, "caught", 0)
         self.planner.set_reference_path(coordinate_system=co)
 
