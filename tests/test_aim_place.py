@@ -69,6 +69,23 @@ def test_a_light_shifted_for_red_makes_the_ego_wait_there(mut, town_seeds):
     assert (on & (np.asarray(trace["speed"]) < 0.5) & red).any()
 
 
+def test_a_light_shifted_for_amber_is_yellow_as_the_ego_comes_to_it(mut, town_seeds):
+    sc = next(s for s in town_seeds if mut._signals_ahead(s))
+    at = mut._signals_ahead(sc)[0][0]
+    route, d = mut._route(sc), -sc.mission.start_pos
+    edge = next(e for e in route if abs((d := d + mut.rmap.edge(e).getLength()) - at) < 1.0)
+    seen = 0
+    for k in range(3):
+        new, desc = shift_light(mut, sc, at, "signal/amber", random.Random(k))
+        trace = execute(new).trace
+        lanes = [str(x) for x in trace["lane"]]
+        # within 30 m of the line (coverage reads the element there) or entering the junction
+        near = [i for i, ln in enumerate(lanes) if ln.startswith(edge + "_")
+                and float(trace["lane_pos"][i]) > mut.rmap.edge(edge).getLength() - 30.0]
+        seen += any(str(trace["tls_state"][i])[:1] in "yY" for i in near)
+    assert seen >= 2
+
+
 def test_no_vehicle_enters_within_reach_of_the_ego(mut, town_seeds):
     """A car that SUMO would insert on the lane beside the ego as the ego passes is refused; the same car
     entering well ahead of it is not (the rule behind the attribution rule ``appeared``)."""
