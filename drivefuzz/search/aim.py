@@ -3,24 +3,28 @@
 A job (:mod:`drivefuzz.campaign.job`) knows which of its seed's reachable cells
 (:func:`drivefuzz.triage.coverage.reachable`) its executions have reached. Under guided feedback it hands
 the rest to :meth:`drivefuzz.search.mutate.Mutator.successor`, which, for a share of the members that add a
-component (``MutationConfig.aim_share``), draws one unreached cell (:func:`pick_cell`: a projection first, so
-that the three grids get equal attention, then a cell) and builds what should produce it (:func:`aimed`):
+component (``MutationConfig.aim_share``), draws one unreached cell (:func:`pick_cell`, uniformly) and builds what
+should produce it (:func:`aimed`). The column is turned into a place on the ego's route first
+(:func:`drivefuzz.search.aim_place.meeting`: a junction's stop line, with its light shifted for amber or red; a
+place where the ego is expected to stand, speed up, slow down or cruise; a route-forced lane change), and the
+party is built to meet the ego there:
 
 - **party** (the rows of party x manoeuvre and party x element): a situation of the catalogue or a maneuver
   program that creates that party, from that side: a vehicle ahead (stopped, slower, braking, pulling out),
-  beside or in a rear quarter (riding beside, overtaking and cutting in, nudging), behind (a follower),
+  beside (riding beside, cutting in, nudging), in a rear quarter (passing close by from behind), behind (a
+  follower),
   oncoming (on the road the other way, or a conflict at a junction from the opposite approach), crossing from
   the left or the right (a conflict at a junction from that side), a walker crossing from that side, a
   walker along the road, grip (a low-friction patch where the ego brakes or turns). A built actor is kept only
   when it stands where the cell wants it (the side of the ego's lane, the approach of its junction);
-- **column**: a junction element or a turn (``signal/*``, ``priority``, ``yield``, ``turn_left``,
-  ``turn_right``) puts the encounter at a junction of the route with that control or turn (the conflict's
-  junction, or an actor within 50 m before it); ``signal/amber`` and ``signal/red`` also shift that light so
-  that it changes as the ego arrives; ``roundabout`` and ``ramp`` / ``merge`` put it on such an edge;
-  ``brake`` / ``stop_go`` / ``cruise`` pick the vehicle-ahead situations that make the ego do that;
+- **column**: the builders that time themselves to the place (a passing car, a follower, crossing traffic at
+  that junction) take it; the others are kept when their actor starts within 50 m before it; ``roundabout``
+  and ``ramp`` / ``merge`` put it on such an edge; ``brake`` / ``stop_go`` / ``cruise`` also pick the
+  vehicle-ahead situations that make the ego do that;
 - **speed x condition**: the weather that makes the condition hold (fog, rain, wind, a low sun ahead of
-  the ego, a low-friction patch; ``clear`` clears them) and a vehicle ahead placed where the ego's expected
-  speed (the mutator's profile of the empty route) is in the band.
+  the ego, a low-friction patch; ``clear`` clears them) and, where the ego's expected speed (the mutator's
+  profile of the route) is in the band, a vehicle ahead (up to 30 km/h) or a car passing close by, an oncoming
+  car or a crossing walker (from 30 km/h: the ego brakes for a vehicle ahead before the encounter).
 
 Every actor still passes the fairness rules (:func:`drivefuzz.search.fairness.unfair`) and the separation:
 aiming changes what is drawn, never what is allowed. The cell drawn and the draws after it come from the
