@@ -249,11 +249,13 @@ def _mission(seed: str):
                        rmap.route(m.start_edge, m.goal_edge), 0.05, sc.seed), rmap
 
 
-def test_the_frame_is_preprocessed_as_the_planners_own_helper_does_and_the_car_starts_from_rest_in_a_bend():
+def test_the_frames_heading_turns_as_its_curvature_says_and_the_car_starts_from_rest_in_a_bend():
     """The adapter's mistake 5 (docs/bugs/commonroad-reactive-planner.md): a frame on the resampled polyline turned
     its heading in steps at SUMO's shape vertices (0.25 rad in one metre, 0.03 in the next) while its curvature
     said 0.1-0.17 1/m; the planner's yaw-rate check reads the heading, so in the roundabout's entry bend no
-    moving sample passed and the car, once at rest there, never started again."""
+    moving sample passed and the car, once at rest there, never started again. The default frame (the path
+    smoothed as CommonRoad's route planner smooths its reference paths) and the planner's own spline preprocessing
+    both start it."""
     from commonroad_dc.pycrcc import CollisionChecker
 
     from adapters.commonroad.base import CarState
@@ -261,19 +263,24 @@ def test_the_frame_is_preprocessed_as_the_planners_own_helper_does_and_the_car_s
     mission, rmap = _mission("roundabout/001")
     # the car at rest in the entry bend (the closed-loop state where limitation 8 was read), the road wheels turned
     at_rest = CarState(-1.8642, 32.2134, -1.6675, 0.0, 0.0, 0.0, -0.0943)
-    top, mismatch = {}, {}
-    for spline in (True, False):
-        ads = ReactivePlannerADS({"spline_frame": spline})
+    top, mismatch, off = {}, {}, {}
+    for frame in ("resample", "chaikin", "spline"):
+        ads = ReactivePlannerADS({"frame": frame})
         ads.reset(mission, rmap)
         co = ads.planner.coordinate_system
         pos, k = np.asarray(co.ref_pos), np.asarray(co.ref_curv)
         turn = np.diff(np.unwrap(np.asarray(co.ref_theta))) / np.diff(pos)
-        mismatch[spline] = float(np.max(np.abs(turn - (k[1:] + k[:-1]) / 2.0)))
+        mismatch[frame] = float(np.max(np.abs(turn - (k[1:] + k[:-1]) / 2.0)))
+        # how far the frame strays from the adapter's reference path, start to goal
+        off[frame] = max(abs(ads.ref.locate(*co.convert_to_cartesian_coords(s, 0.0), hint=0, window=len(ads.ref.pts))[2])
+                         for s in np.arange(31.0, ads.s_goal, 1.0))
         plan = ads.plan(at_rest, CollisionChecker(), desired_speed=3.57)
-        top[spline] = None if plan is None else float(np.max(plan.v))
-    assert mismatch[True] < 0.03 < 0.1 < mismatch[False]  # [1/m]
-    assert top[True] is not None and top[True] > 2.0  # it starts
-    assert top[False] == 0.0  # the former frame: the planner's standstill trajectory
+        top[frame] = None if plan is None else float(np.max(plan.v))
+    assert ads.options.frame == "spline" and ReactivePlannerADS({}).options.frame == "chaikin"
+    assert mismatch["chaikin"] < 0.04 and mismatch["spline"] < 0.04 and mismatch["resample"] > 0.1  # [1/m]
+    assert off["chaikin"] < 0.2 and off["spline"] < 0.7  # [m]
+    assert top["chaikin"] > 2.0 and top["spline"] > 2.0  # it starts
+    assert top["resample"] == 0.0  # the former frame: the planner's standstill trajectory
 
 
 def test_a_roundabout_seed_that_stopped_for_good_in_its_entry_bend_drives_clean():

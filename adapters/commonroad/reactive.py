@@ -10,7 +10,7 @@ and is 2.5x slower); the planner's constructor insists on a CommonRoad scenario,
 empty one and a planning problem at the start; the reference path goes in as a coordinate
 system (``set_reference_path(reference_path=...)`` fails with commonroad-clcs 2025.x), preprocessed as the
 planner's own ``create_coordinate_system`` does (a cubic smoothing spline, resampled 0.5-1 m apart: option
-``spline_frame``; resampled only, the frame's heading turned in steps at SUMO's shape vertices while its
+``frame``; resampled only, the frame's heading turned in steps at SUMO's shape vertices while its
 curvature did not, and at low speed in a bend the yaw-rate check refused every sample; the base class has
 already opened the bends to what the car can turn; the frame's curve subdivision cut the interchange's tight
 left turns by 2.2 m, into the opposite lanes); the car is
@@ -39,6 +39,8 @@ import logging
 import warnings
 
 import numpy as np
+from typing import Literal
+
 from pydantic import Field
 
 with warnings.catch_warnings():  # commonroad-io's generated protobuf code and the route planner warn on import
@@ -55,10 +57,12 @@ with warnings.catch_warnings():  # commonroad-io's generated protobuf code and t
     from commonroad_rp.state import ReactivePlannerState
     from commonroad_rp.utility.config import ReactivePlannerConfiguration
     from commonroad_rp.utility.utils_coordinate_system import CoordinateSystem
+    from commonroad_route_planner.utility.route_util import chaikins_corner_cutting
 
 from drivefuzz.sim.physics import VehicleParams
 
 from adapters.commonroad.base import CarState, CommonRoadADS, Plan
+from adapters.commonroad.scene import _resample
 
 #: [m/s] the speed a car at rest is given for ``set_desired_velocity`` (see the module docstring).
 AT_REST = 1e-3
@@ -129,11 +133,13 @@ class ReactivePlannerADS(CommonRoadADS):
         # problem's): true (default) passes a car at rest as moving at AT_REST m/s; false: as shipped, a car that
         # starts at rest stays there (bug 2)
         rest_fix: bool = True
-        # the curvilinear frame's reference path preprocessed as the planner's own create_coordinate_system does it
-        # (a cubic smoothing spline, then resampled 0.5-1 m apart): true (default); false: only resampled, as before
-        # issue 32's third session, when the heading of the adapter's polyline turned in steps at SUMO's shape
-        # vertices while its curvature did not, and low-speed samples failed the yaw-rate check (limitation 8)
-        spline_frame: bool = True
+        # the curvilinear frame's reference path: "spline" (default), preprocessed as the planner's own
+        # create_coordinate_system does it (a cubic smoothing spline, then resampled 0.5-1 m apart); "chaikin", the
+        # adapter's path sampled 2 m apart and smoothed by Chaikin's corner cutting, as CommonRoad's route planner
+        # builds its reference paths, then resampled; "resample": resampled only, as before issue 32's third
+        # session, when the frame's heading turned in steps at SUMO's shape vertices while its curvature did not,
+        # and low-speed samples in a bend failed the yaw-rate check (the adapter's mistake 5)
+        frame: Literal["spline", "chaikin", "resample"] = "chaikin"
 
     def make_planner(self, reference: np.ndarray, params: VehicleParams) -> None:
         dt = self.options.planner_dt
@@ -154,7 +160,9 @@ class ReactivePlannerADS(CommonRoadADS):
         """A new curvilinear frame on ``reference`` (the planner's own set-up is kept)."""
         old = getattr(self.planner, "_co", None)
         cls = DomainAsNone if self.options.domain_shim else CoordinateSystem
-        co = cls(reference, clcs_params=frame_params(self.options.spline_frame))
+        if self.options.frame == "chaikin":
+            reference = _resample(chaikins_corner_cutting(_resample(reference, 2.0)), 1.0)
+        co = cls(reference, clcs_params=frame_params(self.options.frame == "spline"))
         self.caught_before += getattr(old, "caught", 0)
         self.planner.set_reference_path(coordinate_system=co)
 

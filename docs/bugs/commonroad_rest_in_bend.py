@@ -7,10 +7,11 @@ entry into the ring: curvature up to 0.17 1/m, the car's limit 0.245), an empty 
 boundary, no other road users), the planner's own settings but the horizon (the adapter's 3 s; its default 6 s
 is shown too). The car at rest on the reference, then turned 0.04 rad to the left of it, then the state at
 which the closed-loop run got None (rear axle 5 cm right of the reference, 0.04 rad, its road wheels at
--0.094 rad) brought to rest. Each on two frames: resampled only (``spline_frame=false``, the adapter before
-the fix: its heading turns in steps at SUMO's shape vertices while its curvature is smooth, and the planner's
-yaw-rate check reads the heading), and preprocessed as the planner's own ``create_coordinate_system`` does (a
-smoothing spline; the default now). Run: ``python docs/bugs/commonroad_rest_in_bend.py``.
+-0.094 rad) brought to rest. Each on three frames (the option ``frame``): ``resample``, the adapter before the
+fix (its heading turns in steps at SUMO's shape vertices while its curvature is smooth, and the planner's
+yaw-rate check reads the heading); ``chaikin``, the default now (the path sampled 2 m apart and smoothed by
+Chaikin's corner cutting, as CommonRoad's route planner builds reference paths); ``spline``, preprocessed as
+the planner's own ``create_coordinate_system`` does. Run: ``python docs/bugs/commonroad_rest_in_bend.py``.
 """
 
 from __future__ import annotations
@@ -41,9 +42,9 @@ def main() -> int:
     gx, gy, _ = rmap.geom(rmap.drive_lane(m.goal_edge)).position(m.goal_pos)
     mission = MissionInfo(m.start_lane, m.start_pos, m.goal_edge, m.goal_pos, (gx, gy), route, 0.05, sc.seed)
     at_rest = CarState(-1.8642, 32.2134, -1.6675, 0.0, 0.0, 0.0, -0.0943)  # the closed-loop run's state, at rest
-    for spline in (False, True):
+    for frame in ("resample", "chaikin", "spline"):
         for horizon in (3.0, 6.0):
-            ads = ReactivePlannerADS({"horizon": horizon, "spline_frame": spline})
+            ads = ReactivePlannerADS({"horizon": horizon, "frame": frame})
             ads.reset(mission, rmap)
             co = ads.planner.coordinate_system
             s, _ = co.convert_to_curvilinear_coords(at_rest.x, at_rest.y)  # the same place on either frame
@@ -58,8 +59,7 @@ def main() -> int:
             cases = (("at rest on the reference", CarState(x, y, h, 0.0, 0.0, 0.0, math.atan(2.8 * k))),
                      ("at rest, turned 0.04 rad left of it", CarState(x, y, h + 0.04, 0.0, 0.0, 0.0, math.atan(2.8 * k))),
                      ("at rest, the closed-loop run's state", at_rest))
-            frame = "spline-smoothed frame (the planner's helper)" if spline else "resampled-only frame (before the fix)"
-            print(f"{frame}, horizon {horizon:.0f} s: the frame's heading turns up to {mismatch:.3f} 1/m more or less "
+            print(f"frame={frame}, horizon {horizon:.0f} s: the frame's heading turns up to {mismatch:.3f} 1/m more or less "
                   f"than its curvature; reference curvature here {k:+.3f} 1/m")
             for label, state in cases:
                 plan = ads.plan(state, pycrcc.CollisionChecker(), desired_speed=3.57)
