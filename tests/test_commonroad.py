@@ -283,6 +283,21 @@ def test_the_frames_heading_turns_as_its_curvature_says_and_the_car_starts_from_
     assert top["resample"] == 0.0  # the former frame: the planner's standstill trajectory
 
 
+def test_at_rest_before_a_bend_the_denser_sampling_levels_are_asked_when_the_first_one_only_stands():
+    """Bug 10: plan() stops at the first sampling level whose best sample stands still and returns its standstill
+    trajectory; its denser levels hold moving samples (docs/bugs/commonroad_standstill_first_level.py)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("standstill_first_level",
+                                                  ROOT / "docs" / "bugs" / "commonroad_standstill_first_level.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    shipped, fixed = mod.standing_then_levels(False), mod.standing_then_levels(True)
+    assert shipped[0][1] == 0.0 and shipped[1][1] == 0.0  # plan(), and its first level alone: standing
+    assert shipped[2][1] > 1.0  # the next level moves
+    assert fixed[0][1] == shipped[2][1]  # level_fix takes the first level that moves
+
+
 def test_a_roundabout_seed_that_stopped_for_good_in_its_entry_bend_drives_clean():
     sc = load_scenario(ROOT / "seeds" / "roundabout" / "000")
     ex = execute(sc, ads=load_ads("commonroad-reactive"), oracles=OracleSettings().instantiate())

@@ -66,6 +66,8 @@ from adapters.commonroad.scene import _resample
 
 #: [m/s] the speed a car at rest is given for ``set_desired_velocity`` (see the module docstring).
 AT_REST = 1e-3
+#: [m/s] the planner's own test for standing still (``plan()``'s standstill check)
+STANDING = 0.05
 
 
 def planner_config(params: VehicleParams, dt: float, steps: int) -> ReactivePlannerConfiguration:
@@ -133,6 +135,10 @@ class ReactivePlannerADS(CommonRoadADS):
         # problem's): true (default) passes a car at rest as moving at AT_REST m/s; false: as shipped, a car that
         # starts at rest stays there (bug 2)
         rest_fix: bool = True
+        # at rest, plan() stops at its first sampling level when that level's best sample stands still (every moving
+        # one infeasible), and returns its standstill trajectory without trying its denser levels: true (default)
+        # asks those levels through plan(current_sampling_level=...); false: as shipped (bug 10)
+        level_fix: bool = True
         # the curvilinear frame's reference path: "spline" (default), preprocessed as the planner's own
         # create_coordinate_system does it (a cubic smoothing spline, then resampled 0.5-1 m apart); "chaikin", the
         # adapter's path sampled 2 m apart and smoothed by Chaikin's corner cutting, as CommonRoad's route planner
@@ -154,6 +160,7 @@ class ReactivePlannerADS(CommonRoadADS):
         self.planner = ReactivePlanner(config)
         logging.getLogger("RP_LOGGER").setLevel(logging.ERROR)
         self.caught_before = 0  # what the shim caught on earlier reference windows
+        self.denser_asked = 0  # plan() calls at a denser sampling level (level_fix)
         self.set_reference(reference)
 
     def set_reference(self, reference: np.ndarray) -> None:
@@ -171,7 +178,24 @@ class ReactivePlannerADS(CommonRoadADS):
         info = super().trace_info()
         co = getattr(getattr(self, "planner", None), "_co", None)
         info["domain_shim_caught"] = getattr(self, "caught_before", 0) + getattr(co, "caught", 0)
+        info["denser_levels_asked"] = getattr(self, "denser_asked", 0)
         return info
+
+    def _denser_levels(self, result):
+        """From rest, ``plan()`` stops at the first sampling level whose best sample stands still (every moving
+        sample there infeasible) and returns its standstill trajectory: ask the denser levels in turn, as
+        ``plan()`` itself does when a level has nothing (bug 10). A level with no feasible sample at all raises
+        bug 6's TypeError from the standstill fallback's log line: the standstill trajectory then stays."""
+        planner = self.planner
+        for level in range(2, planner.sampling_level):
+            if max(s.velocity for s in result[0].state_list) > STANDING:
+                break
+            self.denser_asked += 1
+            try:
+                result = planner.plan(current_sampling_level=level) or result
+            except TypeError:
+                pass
+        return result
 
     def plan(self, state: CarState, checker, desired_speed: float) -> Plan | None:
         planner = self.planner
@@ -184,6 +208,8 @@ class ReactivePlannerADS(CommonRoadADS):
         current = max(state.speed, AT_REST) if self.options.rest_fix else state.speed
         planner.set_desired_velocity(desired_speed, current_speed=current)
         result = planner.plan()
+        if self.options.level_fix and result is not None and state.speed <= STANDING and desired_speed > STANDING:
+            result = self._denser_levels(result)
         if result is None:
             return None
         states = result[0].state_list
