@@ -29,7 +29,8 @@ the first, unsmoothed reference; the trace's ``ads_info.domain_shim_caught`` cou
 :class:`DomainAsNone` turns those two exceptions back into None; ``domain_shim=false`` shows the
 planner as installed. docs/bugs/commonroad-reactive-planner.md, bug 1. A second fix (option ``mode_fix``,
 on by default) sets the planner's velocity mode before ``reset()`` converts the car's state (bug 3), and a
-third (``rest_fix``) passes a car at rest as barely moving to ``set_desired_velocity`` (bug 2).
+third (``rest_fix``) passes a car at rest as barely moving to ``set_desired_velocity`` (bug 2), and a fourth
+(``level_fix``) asks the planner's denser sampling levels when, at rest, ``plan()`` stood still on its first (bug 10).
 Both are recorded in the options the trace's scenario carries; every other setting is the planner's own.
 """
 
