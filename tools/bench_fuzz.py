@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
-    from drivefuzz.cli import parse_kv
+    from drivefuzz.cli.common import parse_kv
     from drivefuzz.scenario.model import AdsSpec
     from drivefuzz.scenario.seed import list_seeds
     from drivefuzz.scenario.sumofiles import read_scenario
