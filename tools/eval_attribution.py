@@ -63,9 +63,12 @@ DECIDED = frozenset({"failed_to_yield", "ran_red", "lane_change_into", "stayed_b
                      "obstacle"})
 #: Trace readings of the findings that the clean ADS shares (:func:`load_readings`).
 READINGS = REPO / "tools" / "attribution_readings.json"
-#: The reference ADS's faults that the committed seeds do not show (ego/ads.py).
+#: The reference ADS's faults that the committed seeds do not show (ego/ads.py); the last three bite in one kind of
+#: encounter each (issue 33) and are thin on the town at 1,000 executions: low_sun_blind gives its events on the
+#: highway (``--network highway``), crossing_left_blind about one per 1,000 executions (the clean ADS shares most
+#: of its crossing-traffic collisions: it does not yield at yield links either).
 HIDDEN_FAULTS = ("ignore_pedestrians", "late_braking", "no_fog_slowdown", "no_walker_prediction", "short_headway",
-                 "narrow_corridor")
+                 "narrow_corridor", "right_walker_blind", "crossing_left_blind", "low_sun_blind")
 
 
 def main(argv: list[str] | None = None) -> int:
