@@ -298,13 +298,6 @@ def test_at_rest_before_a_bend_the_denser_sampling_levels_are_asked_when_the_fir
     assert fixed[0][1] == shipped[2][1]  # level_fix takes the first level that moves
 
 
-def test_a_roundabout_seed_that_stopped_for_good_in_its_entry_bend_drives_clean():
-    sc = load_scenario(ROOT / "seeds" / "roundabout" / "000")
-    ex = execute(sc, ads=load_ads("commonroad-reactive"), oracles=OracleSettings().instantiate())
-    assert ex.termination.value == "goal_reached" and not ex.misbehaviors
-    assert ex.trace.meta["ads_info"]["counts"][NO_PLAN] == 0
-
-
 # -- the kept reproducers of docs/bugs/commonroad-reactive-planner.md ----------------------------------------------
 BUGS = ROOT / "docs" / "bugs" / "commonroad-reactive-planner"
 #: the reproducers that drive 13-23 s before the car stops (30-50 s each on a busy machine)
