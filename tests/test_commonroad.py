@@ -318,5 +318,18 @@ def test_each_kept_reproducer_replays_to_its_misbehaviour_at_its_frame_with_the_
     assert (got.oracle, got.kind, got.frame) == (want["oracle"], want["kind"], want["frame"])
     stored = json.loads((BUGS / folder / "trace" / "meta.json").read_text())["ads_info"]["cycles"]
     now = json.loads(json.dumps(ex.trace.meta["ads_info"]["cycles"]))
-    for key in ("t", "outcome", "error", "wall", "v_des"):  # the adapter's decisions and the planner's answers
+    for key in ("t", "outcome", "wall", "v_des"):  # the adapter's decisions and the planner's answers
         assert now[key] == stored[key], key
+    # a cycle that raised raised the same error, up to which of the frame's two projection-domain errors the C++
+    # frame reports first: that is not stable from run to run (seen in CI and in a group run of these replays:
+    # Lateral one time, Longitudinal the other, at the same cycle, with the same misbehaviour at the same frame)
+    assert [_domain_error(e) for e in now["error"]] == [_domain_error(e) for e in stored["error"]]
+
+
+def _domain_error(error: str) -> str:
+    """``error`` with the curvilinear frame's two projection-domain errors named as one."""
+    for side in ("CurvilinearProjectionDomainLateralError: Lateral", "CurvilinearProjectionDomainLongitudinalError: "
+                 "Longitudinal"):
+        if error.startswith(side):
+            return "CurvilinearProjectionDomainError" + error[len(side):]
+    return error
