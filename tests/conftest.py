@@ -26,6 +26,15 @@ def town():
     return load_roadmap(TOWN)
 
 
+@pytest.fixture(scope="module")
+def town_seeds():
+    """The town's committed seed scenarios."""
+    from drivefuzz.scenario.seed import list_seeds
+    from drivefuzz.scenario.sumofiles import read_scenario
+
+    return [read_scenario(p) for p in list_seeds(ROOT / "seeds" / "town")]
+
+
 @pytest.fixture
 def town_scenario(town):
     from drivefuzz.scenario import Mission, Scenario, SimOptions

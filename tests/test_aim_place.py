@@ -11,21 +11,12 @@ import pytest
 
 from drivefuzz.scenario import Actor, ActorKind, NavType
 from drivefuzz.scenario.roadmap import load_roadmap
-from drivefuzz.scenario.seed import list_seeds
-from drivefuzz.scenario.sumofiles import read_scenario
 from drivefuzz.search.aim_place import follower_at, meeting, passes, profile_spots, shift_light, walker_from_left
 from drivefuzz.search.fairness import inserted_within_reach, unfair
 from drivefuzz.search.mutate import Mutator
 from drivefuzz.search.risk import risk_score
 from drivefuzz.sim.execute import execute
 from drivefuzz.triage.coverage import classify, close_encounters
-
-from conftest import ROOT
-
-
-@pytest.fixture(scope="module")
-def town_seeds():
-    return [read_scenario(p) for p in list_seeds(ROOT / "seeds" / "town")]
 
 
 @pytest.fixture(scope="module")

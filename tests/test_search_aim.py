@@ -11,8 +11,6 @@ from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
 from drivefuzz.oracle import OracleSettings
 from drivefuzz.scenario import Weather
 from drivefuzz.scenario.roadmap import load_roadmap
-from drivefuzz.scenario.seed import list_seeds
-from drivefuzz.scenario.sumofiles import read_scenario
 from drivefuzz.search.aim import _lateral, aimed, pick_cell
 from drivefuzz.search.effect import effect_hash
 from drivefuzz.search.mutate import MutationConfig, Mutator
@@ -21,13 +19,6 @@ from drivefuzz.search.schedule import member_value
 from drivefuzz.sim.execute import execute
 from drivefuzz.sim.world import sun_glare
 from drivefuzz.triage.coverage import execution_cells
-
-from conftest import ROOT
-
-
-@pytest.fixture(scope="module")
-def town_seeds():
-    return [read_scenario(p) for p in list_seeds(ROOT / "seeds" / "town")]
 
 
 @pytest.fixture(scope="module")

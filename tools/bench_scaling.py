@@ -56,7 +56,6 @@ Prints only; a benchmark, not a test.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import shutil
@@ -71,6 +70,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from drivefuzz.campaign.fuzz import Campaign, FuzzConfig  # noqa: E402
+from drivefuzz.campaign.job import read_journal  # noqa: E402
 from drivefuzz.scenario.seed import list_seeds  # noqa: E402
 from drivefuzz.scenario.sumofiles import load_scenario  # noqa: E402
 
@@ -264,15 +264,8 @@ def run_point(jobs: int, seeds, budget: float, workdir: Path, rep: int = 0) -> d
 
 def read_work(out: Path) -> dict:
     """Executions, runs, simulated seconds, and the stage timings summed per process, from the journals."""
-    recs = []
-    for path in sorted((out / "jobs").glob("*/journal.jsonl")):
-        for line in path.read_text().splitlines():
-            try:
-                rec = json.loads(line)
-            except ValueError:
-                continue
-            if rec.get("event") == "end":
-                recs.append(rec)
+    recs = [r for path in sorted((out / "jobs").glob("*/journal.jsonl")) for r in read_journal(path)
+            if r.get("event") == "end"]
     db = sqlite3.connect(out / "index.sqlite")
     indexed = db.execute("SELECT COUNT(*) FROM executions").fetchone()[0]
     db.close()

@@ -19,7 +19,6 @@ Prints only; a benchmark, not a test.
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import tempfile
@@ -62,16 +61,11 @@ def aimed_cell(mutation: str) -> str | None:
 
 
 def records(out: Path) -> list[dict]:
-    recs = []
-    for path in sorted((out / "jobs").glob("*/journal.jsonl")):
-        for line in path.read_text().splitlines():
-            try:
-                rec = json.loads(line)
-            except ValueError:
-                continue
-            if rec.get("event") == "end":
-                recs.append(rec)
-    return recs
+    """The executions' records of a campaign's journals."""
+    from drivefuzz.campaign.job import read_journal
+
+    return [r for path in sorted((out / "jobs").glob("*/journal.jsonl")) for r in read_journal(path)
+            if r.get("event") == "end"]
 
 
 def hit_table(recs: list[dict]) -> dict:
