@@ -70,6 +70,9 @@ WINDOW_TURN_MARGIN = 0.3
 WINDOW_MOVE = WINDOW_BACK + 60.0
 #: [m] ... or once less than this (plus twice the horizon's reach) is left ahead of the car
 WINDOW_REACH = 30.0
+#: [m] while a red or yellow stop line's wall is up and the front bumper is within this of the line, the car at
+#: rest is where the adapter wants it (waiting): :attr:`CommonRoadADS.standing_wanted` (two car lengths)
+WALL_HOLD = 10.0
 #: Outcome codes of a planning cycle, as recorded in the trace.
 PLANNED, NO_PLAN, RAISED = "plan", "none", "raised"
 
@@ -149,6 +152,7 @@ class CommonRoadADS(ADS):
         self.log: dict[str, list] = {"t": [], "outcome": [], "error": [], "wall": [], "v_des": [], "v_plan_max": [],
                                      "ref_from": []}
         self.setup_error = ""
+        self.standing_wanted = False  # this cycle: a plan that stands still is what the adapter wants (see _cycle)
         self.window = reference_window(self.ref_pts, 0)
         try:  # a planner that cannot be set up is the ADS failing: every cycle is then recorded as raised
             self.make_planner(self.ref_pts[self.window[0]:self.window[1]], params)
@@ -168,7 +172,10 @@ class CommonRoadADS(ADS):
     @abc.abstractmethod
     def plan(self, state: CarState, checker: "pycrcc.CollisionChecker", desired_speed: float) -> Plan | None:
         """One planning cycle from ``state`` (time step 0), avoiding what ``checker`` holds (time-variant
-        objects over ``self.steps`` steps of ``self.options.planner_dt``); None when there is no plan."""
+        objects over ``self.steps`` steps of ``self.options.planner_dt``); None when there is no plan.
+        ``self.standing_wanted`` says whether a plan that stands still is what the adapter wants this cycle
+        (waiting within :data:`WALL_HOLD` of a red light's stop line, or no speed desired): a planner-specific
+        search for a moving plan (the reactive planner's ``level_fix``) need not run then."""
 
     # -- the ADS ----------------------------------------------------------------------------------
     def done(self) -> bool:
@@ -212,6 +219,8 @@ class CommonRoadADS(ADS):
         if wall is not None:
             checker.add_collision_object(scene.wall_shape(wall))
             v_des = min(v_des, scene.stop_speed(obs.traffic_light.distance, opts.stop_decel, margin=1.0 + lag))
+        # a plan that stands still is what the adapter asks for: waiting at the wall, or no speed desired
+        self.standing_wanted = (wall is not None and obs.traffic_light.distance < WALL_HOLD) or v_des < 0.05
         r = self.params.centre_to_rear_axle
         ch, sh = math.cos(ego.heading), math.sin(ego.heading)
         state = CarState(ego.x - r * ch, ego.y - r * sh, ego.heading, ego.speed, ego.ax, ego.yaw_rate,

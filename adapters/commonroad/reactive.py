@@ -209,7 +209,8 @@ class ReactivePlannerADS(CommonRoadADS):
         current = max(state.speed, AT_REST) if self.options.rest_fix else state.speed
         planner.set_desired_velocity(desired_speed, current_speed=current)
         result = planner.plan()
-        if self.options.level_fix and result is not None and state.speed <= STANDING and desired_speed > STANDING:
+        if (self.options.level_fix and result is not None and state.speed <= STANDING and desired_speed > STANDING
+                and not self.standing_wanted):
             result = self._denser_levels(result)
         if result is None:
             return None
