@@ -119,6 +119,9 @@ class CommonRoadADS(ADS):
         # than its default, it ends there: samples past its end leave the curvilinear frame's projection domain
         # (bug 1's reproducer, with domain_shim=false)
         past_goal: float = Field(scene.PAST_GOAL, gt=0.0)
+        # how other road users move on over the horizon (scene.predictions): constant_velocity along the heading,
+        # or constant_acceleration (acceleration and yaw rate read between planning cycles, clamped)
+        prediction: scene.Prediction = "constant_velocity"
 
     def reset(self, mission: MissionInfo, roadmap) -> None:
         self.params = params = VehicleParams()
@@ -213,7 +216,10 @@ class CommonRoadADS(ADS):
         v_des = min(v_des, scene.stop_speed(to_goal, opts.stop_decel, margin=lag))
         checker = pycrcc.CollisionChecker()
         checker.add_collision_object(self.boundary)
-        for tvo in scene.predictions(obs, self.steps, opts.planner_dt, reach=ego.speed * opts.horizon + 60.0):
+        # the tracks remember each road user from the last cycle (they forget when a new mission's time restarts)
+        tracks = self.__dict__.setdefault("_tracks", scene.Tracks())
+        for tvo in scene.predictions(obs, self.steps, opts.planner_dt, reach=ego.speed * opts.horizon + 60.0,
+                                     mode=opts.prediction, tracks=tracks):
             checker.add_collision_object(tvo)
         wall = scene.stop_wall(obs, self.ref, s_c + ego.length / 2.0)
         if wall is not None:

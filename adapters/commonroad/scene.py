@@ -14,8 +14,10 @@ Everything here is a decision the adapter makes for the planner, kept simple and
   of the edges the reference path runs along and the junctions at their ends (shape and internal
   lanes); sidewalks and, outside junctions, the other direction's lanes are off the road (the
   pieces are computed once per network); :func:`boundary_group` makes them thin boxes just outside;
-- :func:`predictions`: every other road user as a box moving at constant velocity along its
-  heading over the planning horizon (a time-variant collision object);
+- :func:`predictions`: every other road user as a box over the planning horizon (a time-variant
+  collision object), moving at constant velocity along its heading (``constant_velocity``) or, for
+  vehicles, with the acceleration and yaw rate that :class:`Tracks` reads from the change between
+  two planning cycles (``constant_acceleration``; clamped to what a car can do, never backwards);
 - :func:`stop_wall`: a virtual wall across the road at a red (or, when there is room to stop
   comfortably, yellow) stop line;
 - :func:`stop_speed`: the desired speed that stops the car at a point (the goal, the wall).
@@ -27,6 +29,7 @@ from __future__ import annotations
 
 import math
 import weakref
+from typing import Literal, get_args
 
 import numpy as np
 import commonroad_dc.pycrcc as pycrcc
@@ -278,20 +281,110 @@ def as_path(pts: np.ndarray) -> Path:
     return Path(pts, s, np.zeros(len(pts)))
 
 
-def predictions(obs: Observation, steps: int, dt: float, reach: float):
+#: The prediction modes of :func:`predictions` (the type of the adapter's option ``prediction``).
+Prediction = Literal["constant_velocity", "constant_acceleration"]
+PREDICTIONS = get_args(Prediction)
+#: [m/s^2] a predicted vehicle's acceleration is clamped to ``-MAX_DECEL .. MAX_ACCEL`` (full braking on
+#: dry asphalt; a strong car's acceleration) ...
+MAX_DECEL = 9.0
+MAX_ACCEL = 4.0
+#: [rad/s] ... its yaw rate to this, and to what :data:`MAX_LAT_ACCEL` [m/s^2] allows at its speed
+MAX_YAW_RATE = 0.6
+MAX_LAT_ACCEL = 4.0
+#: integration steps per planner time step of a predicted motion with acceleration or yaw rate
+SUBSTEPS = 4
+
+
+class Tracks:
+    """Per road-user id, its speed and heading at the previous planning cycle, and from them its
+    acceleration [m/s^2] and yaw rate [rad/s] now: the change between the two cycles over the time between
+    them, clamped by :func:`clamp_motion`. A road user first seen now (or after a gap) gets 0 and 0. The
+    memory forgets everything when time goes back (a new mission on the same ADS)."""
+
+    def __init__(self) -> None:
+        self.t = -math.inf
+        self.last: dict[str, tuple[float, float]] = {}
+
+    def update(self, obs: Observation) -> dict[str, tuple[float, float]]:
+        """(acceleration, yaw rate) per id of ``obs.objects``; remembers their speed and heading for the next call."""
+        dt = obs.t - self.t
+        if dt <= 0.0:
+            self.last = {}
+        out = {}
+        for o in obs.objects:
+            prev = self.last.get(o.id)
+            if prev is None:
+                out[o.id] = (0.0, 0.0)
+                continue
+            v0, h0 = prev
+            dh = (o.heading - h0 + math.pi) % (2.0 * math.pi) - math.pi
+            out[o.id] = clamp_motion(o.speed, (o.speed - v0) / dt, dh / dt)
+        self.t = obs.t
+        self.last = {o.id: (o.speed, o.heading) for o in obs.objects}
+        return out
+
+
+def clamp_motion(speed: float, accel: float, yaw_rate: float) -> tuple[float, float]:
+    """(acceleration, yaw rate) within what a car can do: :data:`MAX_DECEL`, :data:`MAX_ACCEL`,
+    :data:`MAX_YAW_RATE` and :data:`MAX_LAT_ACCEL` at ``speed`` [m/s]."""
+    accel = min(max(accel, -MAX_DECEL), MAX_ACCEL)
+    w_max = min(MAX_YAW_RATE, MAX_LAT_ACCEL / max(speed, 0.1))
+    return accel, min(max(yaw_rate, -w_max), w_max)
+
+
+def motion(x: float, y: float, heading: float, speed: float, accel: float, yaw_rate: float, steps: int,
+           dt: float) -> np.ndarray:
+    """(steps + 1, 3) x [m], y [m], heading [rad] at time steps ``0..steps`` (``dt`` seconds apart) of a body
+    moving on with constant ``accel`` [m/s^2] and ``yaw_rate`` [rad/s] (both stop once it stands: it never
+    goes backwards), integrated by the midpoint rule in :data:`SUBSTEPS` pieces per step; with both 0 the
+    exact straight line at ``speed``."""
+    out = np.empty((steps + 1, 3))
+    if accel == 0.0 and yaw_rate == 0.0:
+        t = np.arange(steps + 1) * dt
+        out[:, 0] = x + speed * math.cos(heading) * t
+        out[:, 1] = y + speed * math.sin(heading) * t
+        out[:, 2] = heading
+        return out
+    h = dt / SUBSTEPS
+    v = speed
+    out[0] = x, y, heading
+    for k in range(1, steps + 1):
+        for _ in range(SUBSTEPS):
+            v1 = max(v + accel * h, 0.0)
+            if v1 == 0.0 and accel < 0.0:  # it stops within this piece: it covers v^2 / 2|a|
+                dist, dturn = v * v / (-2.0 * accel), yaw_rate * v / -accel if v > 0.0 else 0.0
+            else:
+                dist, dturn = (v + v1) / 2.0 * h, yaw_rate * h if v1 > 0.0 or v > 0.0 else 0.0
+            hm = heading + dturn / 2.0
+            x += dist * math.cos(hm)
+            y += dist * math.sin(hm)
+            heading += dturn
+            v = v1
+        out[k] = x, y, heading
+    return out
+
+
+def predictions(obs: Observation, steps: int, dt: float, reach: float, mode: str = "constant_velocity",
+                tracks: "Tracks | None" = None):
     """One ``pycrcc.TimeVariantCollisionObject`` per road user within ``reach`` metres of the ego: its
-    box at time steps ``0..steps`` (``dt`` seconds apart), moving on at its current speed and heading."""
+    box at time steps ``0..steps`` (``dt`` seconds apart). ``constant_velocity``: moving on at its current
+    speed and heading; ``constant_acceleration``: a vehicle with the acceleration and yaw rate ``tracks``
+    (updated here, once per planning cycle) reads for it (pedestrians, whose SUMO heading turns at every
+    walking-area corner, stay at constant velocity)."""
+    if mode not in PREDICTIONS:
+        raise ValueError(f"prediction {mode!r}: expected one of {', '.join(PREDICTIONS)}")
+    rates = tracks.update(obs) if mode == "constant_acceleration" and tracks is not None else {}
     out = []
     ex, ey = obs.ego.x, obs.ego.y
     for o in obs.objects:
         if abs(o.x - ex) > reach or abs(o.y - ey) > reach:
             continue
-        c, s = math.cos(o.heading), math.sin(o.heading)
-        vx, vy = o.speed * c, o.speed * s
+        accel, yaw_rate = rates.get(o.id, (0.0, 0.0)) if o.kind == "vehicle" else (0.0, 0.0)
+        track = motion(o.x, o.y, o.heading, o.speed, accel, yaw_rate, steps, dt)
         tvo = pycrcc.TimeVariantCollisionObject(0)
-        for k in range(steps + 1):
-            t = k * dt
-            tvo.append_obstacle(pycrcc.RectOBB(o.length / 2.0, o.width / 2.0, o.heading, o.x + vx * t, o.y + vy * t))
+        hl, hw = o.length / 2.0, o.width / 2.0
+        for x, y, h in track.tolist():
+            tvo.append_obstacle(pycrcc.RectOBB(hl, hw, h, x, y))
         out.append(tvo)
     return out
 
