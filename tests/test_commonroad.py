@@ -298,6 +298,45 @@ def test_at_rest_before_a_bend_the_denser_sampling_levels_are_asked_when_the_fir
     assert fixed[0][1] == shipped[2][1]  # level_fix takes the first level that moves
 
 
+def test_at_rest_within_reach_of_a_red_lights_wall_the_denser_levels_are_not_walked_and_on_green_they_are():
+    """level_fix asks the denser sampling levels only where a moving plan is wanted: not while the car waits within
+    WALL_HOLD of a red light's stop line (the first level's standstill is then the answer; walking the levels at
+    every waiting cycle took 98 of town/004's 122 s of planner time). The same car on green still moves (bug 10)."""
+    import importlib.util
+
+    from drivefuzz.scenario.roadmap import load_roadmap
+    from adapters.commonroad.base import WALL_HOLD, reference_window
+
+    spec = importlib.util.spec_from_file_location("standstill_first_level",
+                                                  ROOT / "docs" / "bugs" / "commonroad_standstill_first_level.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    sc = load_scenario(ROOT / "seeds" / "interchange" / "001")
+    m = sc.mission
+    rmap = load_roadmap(sc.network_path())
+    gx, gy, _ = rmap.geom(rmap.drive_lane(m.goal_edge)).position(m.goal_pos)
+    mission = MissionInfo(m.start_lane, m.start_pos, m.goal_edge, m.goal_pos, (gx, gy),
+                          rmap.route(m.start_edge, m.goal_edge), 0.05, sc.seed)
+    rear = mod.AT_REST
+    seen = {}
+    for light in (TrafficLightState("J", 0, WALL_HOLD - 7.7, "r"), TrafficLightState("J", 0, 2.3, "G")):
+        ads = ReactivePlannerADS({})
+        ads.reset(mission, rmap)
+        ads.window = reference_window(ads.ref_pts, mod.WINDOW_FROM + 30)
+        ads.set_reference(ads.ref_pts[ads.window[0]:ads.window[1]])
+        r = ads.params.centre_to_rear_axle
+        x, y = rear.x + r * math.cos(rear.heading), rear.y + r * math.sin(rear.heading)
+        ego = EgoState(x, y, rear.heading, 0.0, 0.0, 0.0, 0.0, 0.0, rear.steer, 4.6, 1.9, ads.params.wheelbase)
+        ads.ref_idx, s_c, _ = ads.ref.locate(x, y, hint=0, window=len(ads.ref_pts))
+        ads._cycle(Observation(100.0, ego, "L", 0.0, 13.9, (), light, None), s_c, ads.s_goal - s_c)
+        seen[light.state] = (ads.standing_wanted, ads.denser_asked, ads.log["outcome"][-1], ads.log["v_plan_max"][-1],
+                             ads.log["v_des"][-1])
+    held, asked, outcome, top, v_des = seen["r"]
+    assert held and asked == 0 and outcome == PLANNED and top == 0.0 and v_des > 0.05  # waits, one level asked
+    held, asked, outcome, top, v_des = seen["G"]
+    assert not held and asked >= 1 and outcome == PLANNED and top > 1.0  # moves off: a denser level was asked
+
+
 # -- the kept reproducers of docs/bugs/commonroad-reactive-planner.md ----------------------------------------------
 BUGS = ROOT / "docs" / "bugs" / "commonroad-reactive-planner"
 #: the reproducers that drive 13-23 s before the car stops (30-50 s each on a busy machine)
