@@ -176,19 +176,58 @@ def test_a_braking_leader_predicted_at_constant_velocity_is_struck_and_at_consta
     assert _collisions(_run(BRAKING_LEADER)) == [(122, ("v0",))]
     ca = _run(BRAKING_LEADER, prediction="constant_acceleration")
     assert _collisions(ca) == []
-    # it still does not brake for the leader (in sight from 3.6 s): every plan keeps above 30 m/s and it passes
-    # with centimetres to spare (limitation 9, not the prediction)
+    # it still does not brake for the leader (in sight from 3.6 s, passed at 6.3 s): every plan keeps above 30 m/s
+    # and it swerves past with centimetres to spare (limitations 11 and 9, not the prediction)
     cycles = ca.trace.meta["ads_info"]["cycles"]
     assert set(cycles["outcome"]) == {"plan"}
-    assert min(v for t, v in zip(cycles["t"], cycles["v_plan_max"]) if t >= 3.6) > 30.0
+    assert min(v for t, v in zip(cycles["t"], cycles["v_plan_max"]) if 3.6 <= t <= 7.0) > 30.0
+    assert ca.termination.value == "goal_reached"
+
+
+class _Samples(ReactivePlannerADS):
+    """The reactive planner, recording at each cycle what its collision check was given: the ego's speed, the
+    lowest end speed among its feasible samples, whether any sample that stays in its lane (|d| <= 1 m) is
+    collision-free, and the lateral offset at the end of the sample it returns."""
+
+    name = "commonroad-reactive"
+
+    def plan(self, state, checker, desired_speed):
+        pl = self.planner
+        if not getattr(pl, "_recorded", False):
+            check = pl._check_collisions
+
+            def recorded(bundle, _check=check, _pl=pl):
+                samples = bundle.get_sorted_list()
+                chosen = _check(bundle)
+                in_lane = any(np.max(np.abs(x.curvilinear.d)) <= 1.0 and not _pl._check_collision_traj_sample(x)
+                              for x in samples)
+                self.rows.append((self._t, self._v, min(x.cartesian.v[-1] for x in samples), in_lane,
+                                  None if chosen is None else float(chosen.curvilinear.d[-1])))
+                return chosen
+
+            pl._check_collisions, pl._recorded = recorded, True
+        self._t, self._v = self.k * self.mission.step_length, state.speed
+        return super().plan(state, checker, desired_speed)
 
 
 def test_the_swerve_into_a_car_alongside_strikes_it_with_either_prediction():
-    """v3 drives on at a constant speed and heading for the last 1.25 s before the contact: both predictions give
-    the same boxes for it, and the ego strikes it with both (earlier with the better prediction of v2)."""
-    ca = _run(SWERVE)
-    assert read_scenario(SWERVE).ads.options["prediction"] == "constant_acceleration"
+    """Limitation 11: v2 stops ahead; the planner's velocity samples end no lower than 0.125 * a_max * horizon
+    (3.4 m/s) below the current speed, so from 5.1 s no sample that stays in the lane is collision-free, and it
+    swerves into the next lane, where v3 drives on at a constant speed and heading (both predictions give the
+    same boxes for it): the ego strikes v3 with either prediction."""
+    sc = read_scenario(SWERVE)
+    assert sc.ads.options["prediction"] == "constant_acceleration"
+    ads = _Samples(sc.ads.options)
+    ads.rows = []
+    verdict = json.loads((SWERVE / "verdict.json").read_text())
+    ca = execute(sc, ads=ads, oracles=OracleSettings(settings=verdict["oracles"]).instantiate())
     assert _collisions(ca) == [(125, ("v3",))]
+    floor = 0.125 * ads.planner.vehicle_params.a_max * ads.options.horizon
+    assert floor == pytest.approx(3.375)
+    assert all(v_end_min >= v - floor - 1e-6 for _, v, v_end_min, _, _ in ads.rows)
+    late = [r for r in ads.rows if r[0] >= 5.1 - 1e-9]
+    assert late and not any(r[3] for r in late)  # no collision-free sample in the lane
+    assert all(r[4] >= 1.8 for r in late if r[4] is not None)  # the samples it returns end in the next lane
     a = ca.trace.actors
     rows = (a.actor == a.ids.index("v3")) & (a.frame >= 125 - 25)
     assert np.ptp(a.speed[rows]) < 1e-6 and np.ptp(a.heading[rows]) < 1e-6
