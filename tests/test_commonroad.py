@@ -132,6 +132,24 @@ def test_the_road_boundary_keeps_the_other_direction_out_and_its_pieces_are_comp
     assert not area.contains(Point(*b.position(b.length / 2)[:2]))
 
 
+def test_no_boundary_box_reaches_into_the_road_at_a_kerb_the_road_bends_round(town):
+    """Each box reaches past its segment's ends only where the road's edge turns left (outside the road): carried on
+    straight at a right turn it reached 0.25 m into the road (intersection/002: a car turning right with 0.22 m to
+    the kerb met it, the planner returned None and never started again)."""
+    from shapely import Polygon
+
+    area = scene.road_area(town, None)
+    group, n = scene.boundary_group(scene.boundary_segments(town, None), np.zeros((1, 2)), reach=1e9)
+    assert n > 400
+    inside = 0.0
+    for box in group.unpack():
+        (cx, cy), hx, hy, ux, uy = box.center(), box.r_x(), box.r_y(), box.local_x_axis(), box.local_y_axis()
+        corners = [(cx + a * hx * ux[0] + b * hy * uy[0], cy + a * hx * ux[1] + b * hy * uy[1])
+                   for a, b in ((1, 1), (1, -1), (-1, -1), (-1, 1))]
+        inside += Polygon(corners).intersection(area).area
+    assert inside < 1e-3  # [m^2] over the whole town (31 m^2 when every box reached past both ends)
+
+
 # -- the fail-safe ----------------------------------------------------------------------------------------------
 class _RaisesAfterOneSecond(ReactivePlannerADS):
     def plan(self, state, checker, desired_speed):
