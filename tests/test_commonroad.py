@@ -338,7 +338,7 @@ def test_at_rest_within_reach_of_a_red_lights_wall_the_denser_levels_are_not_wal
     rear = mod.AT_REST
     seen = {}
     for light in (TrafficLightState("J", 0, WALL_HOLD - 7.7, "r"), TrafficLightState("J", 0, 2.3, "G")):
-        ads = ReactivePlannerADS({})
+        ads = ReactivePlannerADS({"boundary_ends": "every_end"})  # bug 10's state: the first level stands
         ads.reset(mission, rmap)
         ads.window = reference_window(ads.ref_pts, mod.WINDOW_FROM + 30)
         ads.set_reference(ads.ref_pts[ads.window[0]:ads.window[1]])

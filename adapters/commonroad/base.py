@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import abc
 import math
-from typing import Any, NamedTuple
+from typing import Any, Literal, NamedTuple
 
 import numpy as np
 import commonroad_dc.pycrcc as pycrcc
@@ -122,6 +122,10 @@ class CommonRoadADS(ADS):
         # how other road users move on over the horizon (scene.predictions): constant_velocity along the heading,
         # or constant_acceleration (acceleration and yaw rate read between planning cycles, clamped)
         prediction: scene.Prediction = "constant_velocity"
+        # the road boundary's boxes reach past their segments' ends: "outside" (default) only where the road's edge
+        # turns left, so that no box reaches into the road; "every_end": at every end, as before issue 32's fourth
+        # session, when at a kerb the road bends round a box reached up to 0.25 m into the road (mistake 6)
+        boundary_ends: Literal["outside", "every_end"] = "outside"
 
     def reset(self, mission: MissionInfo, roadmap) -> None:
         self.params = params = VehicleParams()
@@ -139,7 +143,8 @@ class CommonRoadADS(ADS):
             self.ref_pts = self.ref_pts[:end]
             self.ref = scene.as_path(self.ref_pts)
         self.profile = _curve_profile(self.ref_pts, self.options.max_lat_accel)
-        self.boundary, self.n_boundary = scene.boundary_group(scene.boundary_segments(roadmap, edges), self.ref_pts)
+        self.boundary, self.n_boundary = scene.boundary_group(scene.boundary_segments(roadmap, edges), self.ref_pts,
+                                                               every_end=self.options.boundary_ends == "every_end")
         opts = self.options
         self.steps = max(int(round(opts.horizon / opts.planner_dt)), 1)
         self.replan_every = max(int(round(opts.replan_period / mission.step_length)), 1)

@@ -120,13 +120,13 @@ def boundary_segments(rmap: RoadMap, edges: "list[str] | None" = None) -> np.nda
     return seg[np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) > 1e-3]
 
 
-def boundary_group(segments: np.ndarray, path_pts: np.ndarray, reach: float = BOUNDARY_REACH):
+def boundary_group(segments: np.ndarray, path_pts: np.ndarray, reach: float = BOUNDARY_REACH, every_end: bool = False):
     """A ``pycrcc.ShapeGroup`` of thin boxes just outside the road along the segments within ``reach``
     metres of ``path_pts`` (n, 2). A box reaches past its segment's end by its own thickness only where the
     road's edge turns left there (a convex corner of the road: the gap between two boxes is outside); where it
     turns right (a kerb the road bends round) the neighbouring boxes already overlap outside, and a box carried
     on straight would reach into the road, by up to its thickness (0.25 m at a right angle: it stopped a car
-    turning right with 0.22 m of clearance to the kerb, issue 32)."""
+    turning right with 0.22 m of clearance to the kerb, issue 32). ``every_end``: past every end, as before."""
     from scipy.spatial import cKDTree
 
     group = pycrcc.ShapeGroup()
@@ -146,8 +146,8 @@ def boundary_group(segments: np.ndarray, path_pts: np.ndarray, reach: float = BO
         ang = math.atan2(y1 - y0, x1 - x0)
         j, k = int(nxt[i]), int(prv[i])
         # reach past an end unless the edge turns right there (cross product < 0), or the neighbour is not known
-        ext1 = WALL_HALF if j >= n or d[i, 0] * d[j, 1] - d[i, 1] * d[j, 0] >= 0.0 else 0.0
-        ext0 = WALL_HALF if k >= n or d[k, 0] * d[i, 1] - d[k, 1] * d[i, 0] >= 0.0 else 0.0
+        ext1 = WALL_HALF if every_end or j >= n or d[i, 0] * d[j, 1] - d[i, 1] * d[j, 0] >= 0.0 else 0.0
+        ext0 = WALL_HALF if every_end or k >= n or d[k, 0] * d[i, 1] - d[k, 1] * d[i, 0] >= 0.0 else 0.0
         along = (ext1 - ext0) / 2.0
         # the road is on the left: the box goes to the right, outside
         cx = (x0 + x1) / 2.0 + WALL_HALF * math.sin(ang) + along * math.cos(ang)
