@@ -138,7 +138,9 @@ class ReactivePlannerADS(CommonRoadADS):
         rest_fix: bool = True
         # at rest, plan() stops at its first sampling level when that level's best sample stands still (every moving
         # one infeasible), and returns its standstill trajectory without trying its denser levels: true (default)
-        # asks those levels through plan(current_sampling_level=...); false: as shipped (bug 10)
+        # asks those levels through plan(current_sampling_level=...), unless standing is what the adapter wants
+        # (self.standing_wanted: waiting at a red light's stop line; walking the levels at each waiting cycle took
+        # 98 of town/004's 122 s of planner time); false: as shipped (bug 10)
         level_fix: bool = True
         # the curvilinear frame's reference path: "spline" (default), preprocessed as the planner's own
         # create_coordinate_system does it (a cubic smoothing spline, then resampled 0.5-1 m apart); "chaikin", the
