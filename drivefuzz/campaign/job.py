@@ -72,6 +72,8 @@ STOP_FILE = "STOP"
 #: Draws of a population member that repeats (in effect) an execution of its job, its parent or a sibling
 #: before the member is skipped (it is not run: a repeat would only cost the time of an execution).
 MAX_REDRAWS = 8
+#: a job stops aiming at a cell once this many of its aimed builds missed it (while it has other cells to aim at)
+AIM_MISSES = 3
 
 
 def job_dir(out: Path, seed_index: int) -> Path:
@@ -161,9 +163,10 @@ class SeedJob:
             write_scenario(scenario, self.out / ref)
         return ref
 
-    def _checkpoint(self, schedule, baseline: dict[str, Any] | None) -> None:
+    def _checkpoint(self, schedule, baseline: dict[str, Any] | None, misses: dict[str, int] | None = None) -> None:
         _sync(self.journal)  # the checkpoint never gets ahead of the journal on the disk
-        atomic_write_json(self.dir / "checkpoint.json", {"schedule": schedule.to_json(), "baseline": baseline})
+        atomic_write_json(self.dir / "checkpoint.json", {"schedule": schedule.to_json(), "baseline": baseline,
+                                                         "aim_misses": misses or {}})
 
     def _read_checkpoint(self, schedule_cls) -> tuple[dict[str, Any], Any]:
         """(checkpoint, schedule) as the last run left them; empty and a new schedule when there is none.
@@ -278,20 +281,21 @@ class SeedJob:
         # come before any execution not yet run, so a resumed job avoids exactly what the first run avoided
         executed = {r["effect"] for r in done.values() if r.get("effect")} | {effect_hash(seed_sc)}
         reach = _seed_reachable(mutator.rmap, seed_sc) if cfg.feedback in GUIDED else ()
+        misses: dict[str, int] = dict(ckpt.get("aim_misses") or {})  # per cell: aimed builds that missed it
 
         while True:
             if schedule.lineage is None:
                 if cfg.one_lineage_per_seed and schedule.lineages >= 1:
                     return "done"
                 schedule.start_lineage(random.Random(f"{cfg.seed}/{self.si}/lineage/{schedule.lineages}"))
-                self._checkpoint(schedule, ckpt["baseline"])
+                self._checkpoint(schedule, ckpt["baseline"], misses)
             lin = schedule.lineage
             parent = seed_sc if lin.current is None else load_scenario(self.out / lin.current).model_copy(
                 update={"ads": cfg.ads})
             parent_hash = parent.content_hash()
             members: list[tuple[dict[str, Any], Any]] = []
             seen = {effect_hash(parent)}
-            aim = [c for c in reach if c not in schedule.cells]  # the job's unreached cells (guided feedback)
+            aim = aim_cells(reach, schedule.cells, misses)  # the job's unreached cells (guided feedback)
             for member in range(cfg.population):
                 t0 = time.perf_counter()
                 key = f"{self.si}/{lin.number}/{lin.cycle}/{member}"
@@ -307,11 +311,12 @@ class SeedJob:
                 if isinstance(rec, str):
                     return rec
                 members.append((rec, mut.scenario))
+            count_misses(misses, [rec for rec, _ in members])
             found = any(rec["finding"] for rec, _ in members)
             ref, hint, value = self._select(members, schedule, random.Random(
                 f"{cfg.seed}/{self.si}/{lin.number}/{lin.cycle}/{parent_hash}/select"))
             schedule.cycle_done(value, ref, hint, found, cfg.continue_after_finding)
-            self._checkpoint(schedule, ckpt["baseline"])
+            self._checkpoint(schedule, ckpt["baseline"], misses)
             if schedule.lineage is None:
                 return "done" if cfg.one_lineage_per_seed else "yielded"
 
@@ -421,6 +426,25 @@ def _seed_reachable(rmap, seed_sc) -> list[str]:
     if key not in _REACH:
         _REACH[key] = reachable(rmap, [seed_sc])
     return _REACH[key]
+
+
+def aim_cells(reach, reached, misses: dict[str, int]) -> list[str]:
+    """The cells a job aims at: its seed's reachable cells not reached yet, less those its aimed builds have missed
+    :data:`AIM_MISSES` times (the aims spread over the others); all unreached ones when every one has."""
+    unreached = [c for c in reach if c not in reached]
+    return [c for c in unreached if misses.get(c, 0) < AIM_MISSES] or unreached
+
+
+def count_misses(misses: dict[str, int], recs: list[dict[str, Any]]) -> None:
+    """Add to ``misses`` the members of a cycle that were aimed at a cell (their ``mutation`` begins ``aim <cell>:``)
+    and did not reach it. Counted at the end of each cycle and kept in the checkpoint, as the schedule's cells are,
+    so a resumed job aims as the first run did."""
+    for rec in recs:
+        mutation = rec.get("mutation") or ""
+        if mutation.startswith("aim "):
+            cell = mutation[4:].split(": ", 1)[0]
+            if cell not in (rec.get("cells") or ()):
+                misses[cell] = misses.get(cell, 0) + 1
 
 
 def _feedback_value(rec: dict[str, Any], mode: str) -> float:

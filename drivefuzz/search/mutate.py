@@ -136,15 +136,35 @@ class Mutator(RoutePlacement):
         return self._route_cache[key]
 
     def ego_lane(self, sc: Scenario, i: int) -> str:
-        """The lane of route edge ``i`` the ego drives: its start lane, or one that leads on along the route."""
-        route = self._route(sc)
+        """The lane of route edge ``i`` the ego drives: its start lane on the first edge; after that the lane a
+        junction leads it into while that lane leads on along the route, else the lane nearest to it that does
+        (a lane-keeping driver: the first connection's lane, as before, was not the ego's on 8 of town's 27
+        route edges; issue 33)."""
         if i == 0:
             return sc.mission.start_lane
-        if i + 1 < len(route):
-            conns = self.rmap.connections(route[i], route[i + 1])
+        key = (sc.mission.start_lane, sc.mission.goal_edge)
+        cache = self.__dict__.setdefault("_ego_lanes", {})
+        if key not in cache:
+            cache[key] = self._lane_keeping(sc)
+        return cache[key][i]
+
+    def _lane_keeping(self, sc: Scenario) -> list[str]:
+        route, rmap = self._route(sc), self.rmap
+        lanes, cur = [], sc.mission.start_lane
+        for i, e in enumerate(route):
+            if rmap.lane(cur).getEdge().getID() != e:
+                cur = rmap.drive_lane(e)
+            conns = rmap.connections(e, route[i + 1]) if i + 1 < len(route) else []
+            leads = sorted({c[0] for c in conns})
+            if leads and cur not in leads:
+                idx = rmap.lane(cur).getIndex()
+                cur = min(leads, key=lambda ln: abs(rmap.lane(ln).getIndex() - idx))
+            lanes.append(cur)
             if conns:
-                return conns[0][0]
-        return self.rmap.drive_lane(route[i])
+                after = {c[0] for c in rmap.connections(route[i + 1], route[i + 2])} if i + 2 < len(route) else None
+                mine = [c for c in conns if c[0] == cur]
+                cur = next((c[1] for c in mine if after is None or c[1] in after), mine[0][1])
+        return lanes
 
     def _spot_along(self, sc: Scenario, rng: random.Random, dist: float, vclass: str,
                     ego_lane: bool = False) -> _Spot | None:
