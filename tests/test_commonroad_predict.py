@@ -143,7 +143,7 @@ def test_the_prediction_is_deterministic():
 
 
 def test_the_option_takes_the_two_modes_and_refuses_others():
-    assert ReactivePlannerADS.Options().prediction == "constant_velocity"
+    assert ReactivePlannerADS.Options().prediction == "constant_acceleration"
     assert ReactivePlannerADS.Options(prediction="constant_acceleration").prediction == "constant_acceleration"
     with pytest.raises(pydantic.ValidationError):
         ReactivePlannerADS.Options(prediction="exact")

@@ -119,9 +119,10 @@ class CommonRoadADS(ADS):
         # than its default, it ends there: samples past its end leave the curvilinear frame's projection domain
         # (bug 1's reproducer, with domain_shim=false)
         past_goal: float = Field(scene.PAST_GOAL, gt=0.0)
-        # how other road users move on over the horizon (scene.predictions): constant_velocity along the heading,
-        # or constant_acceleration (acceleration and yaw rate read between planning cycles, clamped)
-        prediction: scene.Prediction = "constant_velocity"
+        # how other road users move on over the horizon (scene.predictions): constant_acceleration (acceleration and
+        # yaw rate read between planning cycles, clamped), or constant_velocity along the heading (before; four
+        # campaign collisions with braking or accelerating cars were that prediction's, docs/bugs)
+        prediction: scene.Prediction = "constant_acceleration"
         # the road boundary's boxes reach past their segments' ends: "outside" (default) only where the road's edge
         # turns left, so that no box reaches into the road; "every_end": at every end, as before issue 32's fourth
         # session, when at a kerb the road bends round a box reached up to 0.25 m into the road (mistake 6)
