@@ -355,6 +355,48 @@ def test_at_rest_within_reach_of_a_red_lights_wall_the_denser_levels_are_not_wal
     assert not held and asked >= 1 and outcome == PLANNED and top > 1.0  # moves off: a denser level was asked
 
 
+def test_when_the_denser_levels_find_nothing_that_moves_they_are_asked_again_only_after_level_retry():
+    """A stuck cycle that walks the denser levels costs about 25 first-level plans: after a walk that found nothing
+    moving, level_fix waits LEVEL_RETRY seconds (while the car stays at rest) before it walks them again."""
+    import importlib.util
+
+    import commonroad_dc.pycrcc as pycrcc
+    from drivefuzz.scenario.roadmap import load_roadmap
+    from adapters.commonroad.base import reference_window
+    from adapters.commonroad.reactive import LEVEL_RETRY
+
+    spec = importlib.util.spec_from_file_location("standstill_first_level",
+                                                  ROOT / "docs" / "bugs" / "commonroad_standstill_first_level.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    sc = load_scenario(ROOT / "seeds" / "interchange" / "001")
+    m = sc.mission
+    rmap = load_roadmap(sc.network_path())
+    gx, gy, _ = rmap.geom(rmap.drive_lane(m.goal_edge)).position(m.goal_pos)
+    mission = MissionInfo(m.start_lane, m.start_pos, m.goal_edge, m.goal_pos, (gx, gy),
+                          rmap.route(m.start_edge, m.goal_edge), 0.05, sc.seed)
+    ads = ReactivePlannerADS({})
+    ads.reset(mission, rmap)
+    ads.window = reference_window(ads.ref_pts, mod.WINDOW_FROM + 30)
+    ads.set_reference(ads.ref_pts[ads.window[0]:ads.window[1]])
+    rear = mod.AT_REST
+    checker = pycrcc.CollisionChecker()
+    checker.add_collision_object(ads.boundary)
+    # a wall 12 m wide across the lane 1 m ahead of the front bumper: nothing can move
+    front = 2.8 + 0.9 + 1.0 + 0.5
+    checker.add_collision_object(pycrcc.RectOBB(0.5, 6.0, rear.heading, rear.x + front * math.cos(rear.heading),
+                                                rear.y + front * math.sin(rear.heading)))
+    asked = []
+    for k in (0, 6, 12, int(round(LEVEL_RETRY / 0.05))):
+        ads.k = k
+        plan = ads.plan(rear, checker, mod.V_DES)
+        assert plan is not None and float(np.max(plan.v)) == 0.0  # it stands
+        asked.append(ads.denser_asked)
+    assert asked[0] == 2  # the first stuck cycle walks levels 2 and 3
+    assert asked[1] == asked[2] == 2  # 0.3 and 0.6 s later: not again
+    assert asked[3] == 4  # LEVEL_RETRY later: again
+
+
 # -- the kept reproducers of docs/bugs/commonroad-reactive-planner.md ----------------------------------------------
 BUGS = ROOT / "docs" / "bugs" / "commonroad-reactive-planner"
 #: the reproducers that drive 13-23 s before the car stops (30-50 s each on a busy machine)

@@ -69,6 +69,9 @@ from adapters.commonroad.scene import _resample
 AT_REST = 1e-3
 #: [m/s] the planner's own test for standing still (``plan()``'s standstill check)
 STANDING = 0.05
+#: [s] after the denser sampling levels found nothing that moves (``level_fix``), they are asked again only this
+#: much later while the car stays at rest: a stuck cycle that walks them costs about 25 first-level plans
+LEVEL_RETRY = 2.0
 
 
 def planner_config(params: VehicleParams, dt: float, steps: int) -> ReactivePlannerConfiguration:
@@ -140,7 +143,8 @@ class ReactivePlannerADS(CommonRoadADS):
         # one infeasible), and returns its standstill trajectory without trying its denser levels: true (default)
         # asks those levels through plan(current_sampling_level=...), unless standing is what the adapter wants
         # (self.standing_wanted: waiting at a red light's stop line; walking the levels at each waiting cycle took
-        # 98 of town/004's 122 s of planner time); false: as shipped (bug 10)
+        # 98 of town/004's 122 s of planner time), and, after a walk that found nothing moving, not again for
+        # LEVEL_RETRY seconds while the car stays at rest; false: as shipped (bug 10)
         level_fix: bool = True
         # the curvilinear frame's reference path: "spline" (default), preprocessed as the planner's own
         # create_coordinate_system does it (a cubic smoothing spline, then resampled 0.5-1 m apart); "chaikin", the
@@ -164,6 +168,7 @@ class ReactivePlannerADS(CommonRoadADS):
         logging.getLogger("RP_LOGGER").setLevel(logging.ERROR)
         self.caught_before = 0  # what the shim caught on earlier reference windows
         self.denser_asked = 0  # plan() calls at a denser sampling level (level_fix)
+        self.walk_again = 0  # level_fix: the cycle (self.k) from which the denser levels may be asked again
         self.set_reference(reference)
 
     def set_reference(self, reference: np.ndarray) -> None:
@@ -198,6 +203,8 @@ class ReactivePlannerADS(CommonRoadADS):
                 result = planner.plan(current_sampling_level=level) or result
             except TypeError:
                 pass
+        if max(s.velocity for s in result[0].state_list) <= STANDING:  # nothing moves: not again for a while
+            self.walk_again = self.k + int(round(LEVEL_RETRY / self.mission.step_length))
         return result
 
     def plan(self, state: CarState, checker, desired_speed: float) -> Plan | None:
@@ -211,8 +218,10 @@ class ReactivePlannerADS(CommonRoadADS):
         current = max(state.speed, AT_REST) if self.options.rest_fix else state.speed
         planner.set_desired_velocity(desired_speed, current_speed=current)
         result = planner.plan()
+        if state.speed > STANDING:
+            self.walk_again = 0
         if (self.options.level_fix and result is not None and state.speed <= STANDING and desired_speed > STANDING
-                and not self.standing_wanted):
+                and not self.standing_wanted and self.k >= self.walk_again):
             result = self._denser_levels(result)
         if result is None:
             return None
