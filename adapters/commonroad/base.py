@@ -127,6 +127,9 @@ class CommonRoadADS(ADS):
         # turns left, so that no box reaches into the road; "every_end": at every end, as before issue 32's fourth
         # session, when at a kerb the road bends round a box reached up to 0.25 m into the road (mistake 6)
         boundary_ends: Literal["outside", "every_end"] = "outside"
+        # [s] the desired speed takes the bends' limit this far ahead (at the current speed): the planner reaches a
+        # desired speed only by the end of its samples (0: the limit where the car is, as before)
+        curve_lead: float = Field(0.0, ge=0.0)
 
     def reset(self, mission: MissionInfo, roadmap) -> None:
         self.params = params = VehicleParams()
@@ -216,7 +219,9 @@ class CommonRoadADS(ADS):
     def _cycle(self, obs: Observation, s_c: float, to_goal: float) -> None:
         """One planning cycle: the planner's inputs, its call, and the record of what happened."""
         ego, opts = obs.ego, self.options
-        v_des = min(self.limit * opts.speed_margin, self.profile[self.ref_idx])
+        # (with curve_lead, the bends' limit read that many seconds ahead at the current speed, as the stop ramp is)
+        ahead = self.ref_idx + int(opts.curve_lead * ego.speed) + 1  # the points are 1 m apart
+        v_des = min(self.limit * opts.speed_margin, min(self.profile[self.ref_idx:ahead]))
         # the planner reaches a desired speed only by the end of its samples: the ramp aims short by STOP_LAG
         lag = STOP_LAG * ego.speed
         v_des = min(v_des, scene.stop_speed(to_goal, opts.stop_decel, margin=lag))
