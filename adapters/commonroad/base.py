@@ -165,6 +165,7 @@ class CommonRoadADS(ADS):
                                      "ref_from": []}
         self.setup_error = ""
         self.standing_wanted = False  # this cycle: a plan that stands still is what the adapter wants (see _cycle)
+        self.tracks = scene.Tracks()  # each road user's speed and heading at the last cycle (prediction)
         self.window = reference_window(self.ref_pts, 0)
         try:  # a planner that cannot be set up is the ADS failing: every cycle is then recorded as raised
             self.make_planner(self.ref_pts[self.window[0]:self.window[1]], params)
@@ -227,10 +228,8 @@ class CommonRoadADS(ADS):
         v_des = min(v_des, scene.stop_speed(to_goal, opts.stop_decel, margin=lag))
         checker = pycrcc.CollisionChecker()
         checker.add_collision_object(self.boundary)
-        # the tracks remember each road user from the last cycle (they forget when a new mission's time restarts)
-        tracks = self.__dict__.setdefault("_tracks", scene.Tracks())
         for tvo in scene.predictions(obs, self.steps, opts.planner_dt, reach=ego.speed * opts.horizon + 60.0,
-                                     mode=opts.prediction, tracks=tracks):
+                                     mode=opts.prediction, tracks=self.tracks):
             checker.add_collision_object(tvo)
         wall = scene.stop_wall(obs, self.ref, s_c + ego.length / 2.0)
         if wall is not None:
