@@ -124,6 +124,7 @@ class Mutator(RoutePlacement):
         self.rmap = rmap
         self.cfg = config or MutationConfig()
         self._route_cache: dict[tuple, tuple[str, ...]] = {}
+        self._ego_lanes: dict[tuple[str, str], list[str]] = {}  # (start lane, goal edge) -> lane per route edge
         self._conflict_cache: dict[tuple, list] = {}
         self._profile_cache: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
         self._walkable_cache: dict[tuple, bool] = {}
@@ -143,10 +144,9 @@ class Mutator(RoutePlacement):
         if i == 0:
             return sc.mission.start_lane
         key = (sc.mission.start_lane, sc.mission.goal_edge)
-        cache = self.__dict__.setdefault("_ego_lanes", {})
-        if key not in cache:
-            cache[key] = self._lane_keeping(sc)
-        return cache[key][i]
+        if key not in self._ego_lanes:
+            self._ego_lanes[key] = self._lane_keeping(sc)
+        return self._ego_lanes[key][i]
 
     def _lane_keeping(self, sc: Scenario) -> list[str]:
         route, rmap = self._route(sc), self.rmap
