@@ -316,32 +316,28 @@ def test_at_rest_before_a_bend_the_denser_sampling_levels_are_asked_when_the_fir
     assert fixed[0][1] == shipped[2][1]  # level_fix takes the first level that moves
 
 
-def test_at_rest_within_reach_of_a_red_lights_wall_the_denser_levels_are_not_walked_and_on_green_they_are():
-    """level_fix asks the denser sampling levels only where a moving plan is wanted: not while the car waits within
-    WALL_HOLD of a red light's stop line (the first level's standstill is then the answer; walking the levels at
-    every waiting cycle took 98 of town/004's 122 s of planner time). The same car on green still moves (bug 10)."""
+def _bug10_ads(options: dict):
+    """Bug 10's planner-alone reproducer (docs/bugs/commonroad_standstill_first_level.py, as a module) and a
+    ``commonroad-reactive`` ADS with ``options`` set up at its place (seeds/interchange/001, its left turn's stop line)."""
     import importlib.util
-
-    from drivefuzz.scenario.roadmap import load_roadmap
-    from adapters.commonroad.base import WALL_HOLD, reference_window
 
     spec = importlib.util.spec_from_file_location("standstill_first_level",
                                                   ROOT / "docs" / "bugs" / "commonroad_standstill_first_level.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    sc = load_scenario(ROOT / "seeds" / "interchange" / "001")
-    m = sc.mission
-    rmap = load_roadmap(sc.network_path())
-    gx, gy, _ = rmap.geom(rmap.drive_lane(m.goal_edge)).position(m.goal_pos)
-    mission = MissionInfo(m.start_lane, m.start_pos, m.goal_edge, m.goal_pos, (gx, gy),
-                          rmap.route(m.start_edge, m.goal_edge), 0.05, sc.seed)
-    rear = mod.AT_REST
+    return mod, mod.ads_at_the_stop_line(options)
+
+
+def test_at_rest_within_reach_of_a_red_lights_wall_the_denser_levels_are_not_walked_and_on_green_they_are():
+    """level_fix asks the denser sampling levels only where a moving plan is wanted: not while the car waits within
+    WALL_HOLD of a red light's stop line (the first level's standstill is then the answer; walking the levels at
+    every waiting cycle took 98 of town/004's 122 s of planner time). The same car on green still moves (bug 10)."""
+    from adapters.commonroad.base import WALL_HOLD
+
     seen = {}
     for light in (TrafficLightState("J", 0, WALL_HOLD - 7.7, "r"), TrafficLightState("J", 0, 2.3, "G")):
-        ads = ReactivePlannerADS({"boundary_ends": "every_end"})  # bug 10's state: the first level stands
-        ads.reset(mission, rmap)
-        ads.window = reference_window(ads.ref_pts, mod.WINDOW_FROM + 30)
-        ads.set_reference(ads.ref_pts[ads.window[0]:ads.window[1]])
+        mod, ads = _bug10_ads({"boundary_ends": "every_end"})  # bug 10's state: the first level stands
+        rear = mod.AT_REST
         r = ads.params.centre_to_rear_axle
         x, y = rear.x + r * math.cos(rear.heading), rear.y + r * math.sin(rear.heading)
         ego = EgoState(x, y, rear.heading, 0.0, 0.0, 0.0, 0.0, 0.0, rear.steer, 4.6, 1.9, ads.params.wheelbase)
@@ -358,27 +354,10 @@ def test_at_rest_within_reach_of_a_red_lights_wall_the_denser_levels_are_not_wal
 def test_when_the_denser_levels_find_nothing_that_moves_they_are_asked_again_only_after_level_retry():
     """A stuck cycle that walks the denser levels costs about 25 first-level plans: after a walk that found nothing
     moving, level_fix waits LEVEL_RETRY seconds (while the car stays at rest) before it walks them again."""
-    import importlib.util
-
     import commonroad_dc.pycrcc as pycrcc
-    from drivefuzz.scenario.roadmap import load_roadmap
-    from adapters.commonroad.base import reference_window
     from adapters.commonroad.reactive import LEVEL_RETRY
 
-    spec = importlib.util.spec_from_file_location("standstill_first_level",
-                                                  ROOT / "docs" / "bugs" / "commonroad_standstill_first_level.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    sc = load_scenario(ROOT / "seeds" / "interchange" / "001")
-    m = sc.mission
-    rmap = load_roadmap(sc.network_path())
-    gx, gy, _ = rmap.geom(rmap.drive_lane(m.goal_edge)).position(m.goal_pos)
-    mission = MissionInfo(m.start_lane, m.start_pos, m.goal_edge, m.goal_pos, (gx, gy),
-                          rmap.route(m.start_edge, m.goal_edge), 0.05, sc.seed)
-    ads = ReactivePlannerADS({})
-    ads.reset(mission, rmap)
-    ads.window = reference_window(ads.ref_pts, mod.WINDOW_FROM + 30)
-    ads.set_reference(ads.ref_pts[ads.window[0]:ads.window[1]])
+    mod, ads = _bug10_ads({})
     rear = mod.AT_REST
     checker = pycrcc.CollisionChecker()
     checker.add_collision_object(ads.boundary)

@@ -34,20 +34,27 @@ WINDOW_FROM = 231
 V_DES = 4.1804
 
 
-def standing_then_levels(level_fix: bool) -> list[tuple[str, float | None]]:
-    """(what was asked, the plan's top speed or None) for ``plan()`` and then each level on its own."""
+def ads_at_the_stop_line(options: dict) -> ReactivePlannerADS:
+    """A ``commonroad-reactive`` ADS with ``options`` set up for seeds/interchange/001's mission, with the reference
+    window the closed-loop run had at the stop line of its left turn (where :data:`AT_REST` stands)."""
     sc = load_scenario(ROOT / "seeds" / "interchange" / "001")
     m = sc.mission
     rmap = load_roadmap(sc.network_path())
     gx, gy, _ = rmap.geom(rmap.drive_lane(m.goal_edge)).position(m.goal_pos)
     mission = MissionInfo(m.start_lane, m.start_pos, m.goal_edge, m.goal_pos, (gx, gy),
                           rmap.route(m.start_edge, m.goal_edge), 0.05, sc.seed)
-    # the road boundary as the closed-loop run had it (its boxes reached past every end, 0.25 m into the road at
-    # kerbs: the adapter's mistake 6); with the corrected boundary the first level moves at this state
-    ads = ReactivePlannerADS({"level_fix": level_fix, "boundary_ends": "every_end"})
+    ads = ReactivePlannerADS(options)
     ads.reset(mission, rmap)
     ads.window = reference_window(ads.ref_pts, WINDOW_FROM + 30)
     ads.set_reference(ads.ref_pts[ads.window[0]:ads.window[1]])
+    return ads
+
+
+def standing_then_levels(level_fix: bool) -> list[tuple[str, float | None]]:
+    """(what was asked, the plan's top speed or None) for ``plan()`` and then each level on its own."""
+    # the road boundary as the closed-loop run had it (its boxes reached past every end, 0.25 m into the road at
+    # kerbs: the adapter's mistake 6); with the corrected boundary the first level moves at this state
+    ads = ads_at_the_stop_line({"level_fix": level_fix, "boundary_ends": "every_end"})
     checker = pycrcc.CollisionChecker()
     checker.add_collision_object(ads.boundary)
     plan = ads.plan(AT_REST, checker, V_DES)
