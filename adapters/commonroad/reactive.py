@@ -146,10 +146,10 @@ class ReactivePlannerADS(CommonRoadADS):
         # 98 of town/004's 122 s of planner time), and, after a walk that found nothing moving, not again for
         # LEVEL_RETRY seconds while the car stays at rest; false: as shipped (bug 10)
         level_fix: bool = True
-        # the curvilinear frame's reference path: "spline" (default), preprocessed as the planner's own
-        # create_coordinate_system does it (a cubic smoothing spline, then resampled 0.5-1 m apart); "chaikin", the
-        # adapter's path sampled 2 m apart and smoothed by Chaikin's corner cutting, as CommonRoad's route planner
-        # builds its reference paths, then resampled; "resample": resampled only, as before issue 32's third
+        # the curvilinear frame's reference path: "chaikin" (default), the adapter's path sampled 2 m apart and
+        # smoothed by Chaikin's corner cutting, as CommonRoad's route planner builds its reference paths, then
+        # resampled; "spline", preprocessed as the planner's own create_coordinate_system does it (a cubic smoothing
+        # spline, then resampled 0.5-1 m apart); "resample": resampled only, as before issue 32's third
         # session, when the frame's heading turned in steps at SUMO's shape vertices while its curvature did not,
         # and low-speed samples in a bend failed the yaw-rate check (the adapter's mistake 5)
         frame: Literal["spline", "chaikin", "resample"] = "chaikin"
