@@ -53,12 +53,12 @@ from drivefuzz.search.mutate import Mutation, Mutator
 NEAR_JUNCTION_M = 50.0
 #: builders that time their actor to the aimed place themselves (no filter on where it starts)
 TIMED = ("passes", "follower", "crossing", "oncoming", "grip")
-#: [m/s] bounds of the speed bands (drivefuzz.triage.coverage.SPEED_BANDS), by band name
 #: share of the aimed components built on the mission alone (the parent's actors, puddles and light shifts
 #: dropped): on a lineage's parent, with up to 12 actors that slow, stop and meet the ego first, the place and
 #: timing (the mutator's profile of the ego on an empty road) are off. One 1,000-execution town campaign each:
 #: all bare, cell hits 10 % and coverage 66.0 %; none bare, 8 % and 66.0 %: half and half keeps both kinds
 BARE_SHARE = 0.5
+#: [m/s] bounds of the speed bands (drivefuzz.triage.coverage.SPEED_BANDS), by band name
 BANDS = {"0-10 km/h": (0.0, 2.8), "10-30 km/h": (2.8, 8.3), "30-60 km/h": (8.3, 16.7), "60+ km/h": (16.7, 99.0)}
 
 
