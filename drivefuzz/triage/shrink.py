@@ -13,6 +13,15 @@ signature** (:mod:`drivefuzz.triage.signature`, which includes the rules' attrib
 Every candidate costs one execution and the number of executions is bounded (``budget``, default 30); a
 shrink that runs out of budget returns the smallest scenario found so far, which always still fails the
 same way. Deterministic: the same finding and budget give the same result.
+
+Two candidates are judged without a run of their own (each still counts against the budget, so that the search
+and its result are the same as with the run; ``Shrunk.reused`` counts them): a candidate judged before in the same
+shrink (ddmin may come back to one; executions are deterministic), and, when the caller gives the original run
+(``known``), the time window's cut that drops no actor: it differs from the scenario only in its time limit, which
+ends the run after the failure, and nothing before the end reads it (the executor checks it for the end, the
+mission oracle reports it at a time-out, no ADS is given it), so its run up to the failure is the original's. If
+the search keeps that cut as its result, the cut is run once to give the minimal folder its own trace (and if
+that run did not fail the same way, the result is the original scenario).
 """
 
 from __future__ import annotations
@@ -52,13 +61,16 @@ class Shrunk:
     misbehavior: Misbehavior  # the failure of the shrunk scenario
     before: Size
     after: Size
-    executions: int
+    executions: int  # candidates judged (the budget's unit)
     signature: str
     trace: Any = None  # of the shrunk scenario's run (None: the original was already minimal)
+    reused: int = 0  # of the executions, candidates judged without a run of their own (module docstring)
+    runs: int | None = None  # executions actually run (None: ``executions``)
 
     def as_dict(self) -> dict[str, Any]:
         return {"before": self.before.as_dict(), "after": self.after.as_dict(), "executions": self.executions,
-                "signature": self.signature, "frame": self.misbehavior.frame}
+                "signature": self.signature, "frame": self.misbehavior.frame, "reused": self.reused,
+                "runs": self.executions if self.runs is None else self.runs}
 
     @property
     def summary(self) -> str:
@@ -95,35 +107,59 @@ class _Tester:
 
     def __init__(self, run: Run, judge: Judge, original: Misbehavior, signature: str, budget: int):
         self.run, self.judge, self.original, self.signature = run, judge, original, signature
-        self.budget, self.spent = budget, 0
+        self.budget, self.spent, self.reused, self.runs = budget, 0, 0, 0
         self.trace = None  # of the last candidate that passed
+        self.seen: list[tuple[Scenario, Misbehavior | None, Any]] = []  # candidates judged: (scenario, result, trace)
 
     @property
     def exhausted(self) -> bool:
         return self.spent >= self.budget
 
-    def __call__(self, sc: Scenario) -> Misbehavior | None:
+    def __call__(self, sc: Scenario, known: "tuple[Sequence[Misbehavior], Any] | None" = None) -> Misbehavior | None:
+        """Judge ``sc``: its run's misbehaviour with the signature, or None. ``known``: its run's result, given
+        (no run); a candidate judged before is judged on its earlier run. Either way it counts against the budget."""
         self.spent += 1
-        got = self.run(sc)
+        for prev, m, trace in self.seen:
+            if prev == sc:
+                self.reused += 1
+                if m is not None:
+                    self.trace = trace
+                return m
+        if known is None:
+            self.runs += 1
+            got = self.run(sc)
+        else:
+            self.reused += 1
+            got = known
+        m, trace = self._judge(sc, got)
+        self.seen.append((sc, m, trace))
+        if m is not None:
+            self.trace = trace
+        return m
+
+    def _judge(self, sc: Scenario, got) -> tuple[Misbehavior | None, Any]:
         if got is None:
-            return None
+            return None, None
         misbehaviors, trace = got
         for m in misbehaviors:
             if m.oracle == self.original.oracle and m.kind == self.original.kind:
                 if self.judge(sc, m, trace) != self.signature:
-                    return None
-                self.trace = trace
-                return m
-        return None
+                    return None, None
+                return m, trace
+        return None, None
 
 
 def shrink(scenario: Scenario, original: Misbehavior, signature: str, run: Run, judge: Judge,
-           budget: int = DEFAULT_BUDGET) -> Shrunk:
-    """The smallest scenario found within ``budget`` executions that fails with ``signature``."""
+           budget: int = DEFAULT_BUDGET, known: "tuple[Sequence[Misbehavior], Any] | None" = None) -> Shrunk:
+    """The smallest scenario found within ``budget`` executions that fails with ``signature``. ``known``: the
+    (misbehaviours, trace) of ``scenario``'s own run, which judges the time window's cut when it drops no actor
+    (module docstring)."""
     test = _Tester(run, judge, original, signature, budget)
     best, best_m = scenario, original
     cut = _cut_window(scenario, original)
-    if cut != scenario and not test.exhausted and (m := test(cut)) is not None:
+    # the cut that only ends the run sooner ran, up to the failure, as the original did
+    same_run = known if known is not None and cut.actors == scenario.actors else None
+    if cut != scenario and not test.exhausted and (m := test(cut, same_run)) is not None:
         best, best_m = cut, m
     base = best  # components are named in it (puddles by index): candidates are always cut from it
     comps = _components(base)
@@ -143,8 +179,16 @@ def shrink(scenario: Scenario, original: Misbehavior, signature: str, run: Run, 
             if n >= len(comps):
                 break
             n = min(len(comps), 2 * n)
-    return Shrunk(best, best_m, Size.of(scenario), Size.of(best), test.spent, signature,
-                  test.trace if best is not scenario else None)
+    trace = test.trace if best is not scenario else None
+    if best is cut and same_run is not None:  # judged on the original's run: the minimal folder gets its own
+        test.runs += 1
+        m, trace = test._judge(cut, run(cut))
+        if m is None:  # not as argued in the module docstring: keep the original, which fails
+            best, best_m, trace = scenario, original, None
+        else:
+            best_m = m
+    return Shrunk(best, best_m, Size.of(scenario), Size.of(best), test.spent, signature, trace, test.reused,
+                  test.runs)
 
 
 def _cut_window(sc: Scenario, m: Misbehavior) -> Scenario:

@@ -148,7 +148,8 @@ class FindingStore:
         if trace is not None and fault != "other" and self.cfg.shrink > 0:
             from drivefuzz.triage.shrink import rules_signature, shrink
 
-            shrunk = shrink(scenario, m, rules_key, self.run, rules_signature(self.rmap), self.cfg.shrink)
+            shrunk = shrink(scenario, m, rules_key, self.run, rules_signature(self.rmap), self.cfg.shrink,
+                            known=(misbehaviors, trace))  # the run it was found in judges the window's cut
         sub = INCIDENTS if fault == "other" else FINDINGS
         rel = f"{sub}/{sig_key}-{m.oracle}"
         with atomic_dir(self.out / rel) as tmp:
