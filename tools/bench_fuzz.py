@@ -159,7 +159,8 @@ def report(index: Path, total: float, args, cfg) -> None:
 
 
 def triage_cost(out: Path) -> None:
-    """What triage cost per new signature, in executions' worth (the goal: at most 15)."""
+    """What triage cost per new signature, in executions' worth (the goal: at most 15), and in what: the runs of
+    the careful driver and the reproduction, the shrink's, and the frames they simulated."""
     recs = []
     for path in sorted((out / "jobs").glob("*/journal.jsonl")):
         recs += [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
@@ -173,10 +174,18 @@ def triage_cost(out: Path) -> None:
     mean_exec = sum(plain) / len(plain)
     t_new = [r["timings"].get("triage", 0.0) for r in new]
     t_hit = [r["timings"].get("triage", 0.0) for r in hits] or [0.0]
-    print(f"triage: {len(new)} new signature(s), {sum(r['triage_execs'] for r in new)} reruns "
-          f"({sum(r['triage_execs'] for r in new) / len(new):.1f} each); per new signature {sum(t_new) / len(new):.2f} s "
-          f"= {sum(t_new) / len(new) / mean_exec:.1f} executions' worth (mean execution {mean_exec:.3f} s); "
-          f"a repeat of a known signature {1000 * sum(t_hit) / len(t_hit):.1f} ms")
+    # a record's runs and simulated seconds count its execution and every triage rerun, the shrink's included
+    reruns = sum(r.get("runs", 1 + r["triage_execs"]) - 1 for r in new)
+    replays = sum(r["triage_execs"] for r in new)
+    step = 0.05
+    frames = sum(round(r.get("sim_s", 0.0) / step) - (r.get("frames") or 0) for r in new)
+    print(f"triage: {len(new)} new signature(s), {reruns} reruns ({reruns / len(new):.1f} each: {replays} careful "
+          f"driver and reproduction, {reruns - replays} shrink), {frames:,} frames; per new signature "
+          f"{sum(t_new) / len(new):.2f} s = {sum(t_new) / len(new) / mean_exec:.1f} executions' worth (mean execution "
+          f"{mean_exec:.3f} s); a repeat of a known signature {1000 * sum(t_hit) / len(t_hit):.1f} ms")
+    for r in new:
+        print(f"  {r['signature']} {r.get('verdict', '?'):<28} {r.get('runs', 1) - 1:>3} reruns "
+              f"{round(r.get('sim_s', 0.0) / step) - (r.get('frames') or 0):>7,} frames {r['timings'].get('triage', 0.0):6.2f} s")
 
 
 if __name__ == "__main__":
