@@ -27,6 +27,7 @@ from drivefuzz.triage.coverage import (
     classify,
     close_encounters,
     execution_cells,
+    format_coverage,
     reachable,
     split,
     summarise,
@@ -154,15 +155,21 @@ def test_reachable_cells_follow_the_network_and_the_routes(offered):
         assert {f"speed-condition:10-30 km/h|{c}" for c in CONDITIONS} <= cells, net
 
 
-def test_summarise_counts_reached_cells_findings_and_incidents():
+def test_summarise_counts_reached_cells_findings_incidents_and_aims():
     reach = ["party-manoeuvre:vehicle/ahead|brake", "party-manoeuvre:vehicle/behind|cruise",
              "speed-condition:0-10 km/h|clear"]
     records = [{"cells": reach[:1] + ["party-element:none/grip|edge"], "finding": "findings/x"},
-               {"cells": reach[:1], "incident": "incidents/y"}, {"cells": []}]
+               {"cells": reach[:1], "incident": "incidents/y", "mutation": f"aim {reach[0]}: a stopped car"},
+               {"cells": [], "mutation": f"aim {reach[1]}: a follower"},
+               {"cells": [], "mutation": f"aim {reach[1]}: a follower"}, {"cells": [], "mutation": "add actor"}]
     cov = summarise(records, reach)
     assert (cov["reachable"], cov["reached"], cov["share"]) == (3, 1, round(1 / 3, 4))
-    assert cov["cells"][reach[0]] == {"count": 2, "findings": 1, "incidents": 1}
-    assert cov["cells"][reach[1]]["count"] == 0
+    assert cov["cells"][reach[0]] == {"count": 2, "findings": 1, "incidents": 1, "aimed": 1}
+    assert cov["cells"][reach[1]] == {"count": 0, "findings": 0, "incidents": 0, "aimed": 2}
+    assert cov["cells"][reach[2]]["aimed"] == 0
+    text = format_coverage(cov)
+    assert "never reached, aimed at and missed (1; aimed executions): vehicle/behind|cruise (2)" in text
+    assert "never reached, never aimed at (1): 0-10 km/h|clear" in text
     assert cov["projections"]["party-manoeuvre"] == {"reachable": 2, "reached": 1}
     assert cov["outside"] == {"party-element:none/grip|edge": {"count": 1, "findings": 1, "incidents": 0}}
 

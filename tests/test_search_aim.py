@@ -11,7 +11,7 @@ from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
 from drivefuzz.oracle import OracleSettings
 from drivefuzz.scenario import Weather
 from drivefuzz.scenario.roadmap import load_roadmap
-from drivefuzz.campaign.job import aim_cells, count_misses
+from drivefuzz.campaign.job import aim_cells, count_misses, share_cells
 from drivefuzz.search.aim import _lateral, aimed, pick_cell
 from drivefuzz.search.effect import effect_hash
 from drivefuzz.search.mutate import MutationConfig, Mutator
@@ -19,7 +19,7 @@ from drivefuzz.search.risk import risk_score
 from drivefuzz.search.schedule import member_value
 from drivefuzz.sim.execute import execute
 from drivefuzz.sim.world import sun_glare
-from drivefuzz.triage.coverage import execution_cells
+from drivefuzz.triage.coverage import execution_cells, reachable
 
 
 @pytest.fixture(scope="module")
@@ -159,6 +159,27 @@ def test_a_job_stops_aiming_at_a_cell_its_aims_keep_missing():
     assert aim_cells([a, b, c], set(), misses) == [b, c]
     assert aim_cells([a, b, c], {b}, misses) == [c]
     assert aim_cells([a, b, c], {b, c}, misses) == [a]  # every unreached cell missed K times: all of them again
+
+
+def test_a_campaign_shares_its_cells_among_its_seed_jobs(town_seeds):
+    """Each reachable cell falls to exactly one job whose seed offers it, the shares are balanced, and every job
+    computes the same shares alone (a pure function of the seeds). A job aims at its share first."""
+    rmap = load_roadmap(town_seeds[0].network_path())
+    reaches = [reachable(rmap, [sc]) for sc in town_seeds]
+    shares = share_cells(reaches)
+    assert shares == share_cells([list(r) for r in reaches])
+    owner = {c: i for i, cells in enumerate(shares) for c in cells}
+    assert sum(len(s) for s in shares) == len(owner) == len(set().union(*map(set, reaches)))
+    assert all(c in reaches[i] for c, i in owner.items())
+    sizes = sorted(len(s) for s in shares)
+    assert sizes[-1] - sizes[0] <= 1, sizes  # town's seeds offer most cells: the shares differ by one at most
+    # a cell one seed alone offers goes to that seed
+    assert share_cells([["a", "b"], ["b"], ["b", "c"]]) == [["a"], ["b"], ["c"]]
+
+    a, b, c = "party-element:vehicle/ahead|edge", "party-manoeuvre:vehicle/behind|brake", "speed-condition:0-10 km/h|fog"
+    assert aim_cells([a, b, c], set(), {}, own=[c]) == [c]
+    assert aim_cells([a, b, c], {c}, {}, own=[c]) == [a, b]  # its share reached: the seed's other cells
+    assert aim_cells([a, b, c], set(), {c: 3}, own=[c]) == [a, b]  # its share missed K times: the others
 
 
 def test_member_values_of_the_guided_feedbacks():

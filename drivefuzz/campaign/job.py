@@ -65,6 +65,7 @@ from drivefuzz.oracle import Misbehavior
 from drivefuzz.storage import atomic_write_json, atomic_write_text
 from drivefuzz.search.effect import effect_hash
 from drivefuzz.search.schedule import GUIDED
+from drivefuzz.triage.coverage import aimed_cell
 from drivefuzz.triage.store import FindingStore, TriageConfig
 from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
 
@@ -281,6 +282,7 @@ class SeedJob:
         # come before any execution not yet run, so a resumed job avoids exactly what the first run avoided
         executed = {r["effect"] for r in done.values() if r.get("effect")} | {effect_hash(seed_sc)}
         reach = _seed_reachable(mutator.rmap, seed_sc) if cfg.feedback in GUIDED else ()
+        own = self._own_cells(mutator.rmap, reach) if reach else ()
         misses: dict[str, int] = dict(ckpt.get("aim_misses") or {})  # per cell: aimed builds that missed it
 
         while True:
@@ -295,7 +297,7 @@ class SeedJob:
             parent_hash = parent.content_hash()
             members: list[tuple[dict[str, Any], Any]] = []
             seen = {effect_hash(parent)}
-            aim = aim_cells(reach, schedule.cells, misses)  # the job's unreached cells (guided feedback)
+            aim = aim_cells(reach, schedule.cells, misses, own)  # the job's unreached cells (guided feedback)
             for member in range(cfg.population):
                 t0 = time.perf_counter()
                 key = f"{self.si}/{lin.number}/{lin.cycle}/{member}"
@@ -335,6 +337,17 @@ class SeedJob:
             if prior is not None or eff not in avoid:
                 return mut, eff, redraw
         return None
+
+    def _own_cells(self, rmap, reach) -> list[str]:
+        """The cells of :func:`share_cells` that fall to this job, from the manifest's seeds (all of one network
+        in a campaign; a seed on another network offers none of this one's cells)."""
+        manifest = json.loads((self.out / "manifest.json").read_text())
+        reaches = []
+        for i, ref in enumerate(manifest["seeds"]):
+            sc = self.seed if i == self.si else load_scenario(self.out / ref)
+            reaches.append(reach if i == self.si else
+                           _seed_reachable(rmap, sc) if sc.network_path() == self.seed.network_path() else [])
+        return share_cells(reaches)[self.si]
 
     def _select(self, members: list[tuple[dict[str, Any], Any]], schedule, rng: random.Random):
         """(corpus folder, riskiest actor, feedback value) of the member that becomes the next scenario, or
@@ -428,11 +441,36 @@ def _seed_reachable(rmap, seed_sc) -> list[str]:
     return _REACH[key]
 
 
-def aim_cells(reach, reached, misses: dict[str, int]) -> list[str]:
-    """The cells a job aims at: its seed's reachable cells not reached yet, less those its aimed builds have missed
-    :data:`AIM_MISSES` times (the aims spread over the others); all unreached ones when every one has."""
+def share_cells(reaches: list[list[str]]) -> list[list[str]]:
+    """Each seed job's share of the campaign's reachable cells: every cell goes to one of the seeds that offer it
+    (``reaches[i]``: seed i's cells), the cells fewest seeds offer first, each to the offering seed with the
+    smallest share so far (the lower index on a tie). A pure function of the seeds, so every job computes the
+    same shares alone, without hearing from the others (they run in parallel: a campaign-wide count of what was
+    reached would make a job's draws depend on the others' timing). Without it every job aims at all its seed's
+    cells, and eight town jobs aim at the same ~80 unreached cells, each a few times."""
+    offered: dict[str, list[int]] = {}
+    for i, cells in enumerate(reaches):
+        for c in cells:
+            offered.setdefault(c, []).append(i)
+    shares: list[list[str]] = [[] for _ in reaches]
+    for c in sorted(offered, key=lambda c: (len(offered[c]), c)):
+        i = min(offered[c], key=lambda i: (len(shares[i]), i))
+        shares[i].append(c)
+    return [sorted(s) for s in shares]
+
+
+def aim_cells(reach, reached, misses: dict[str, int], own=()) -> list[str]:
+    """The cells a job aims at: its share of the campaign's cells (``own``, :func:`share_cells`) not reached yet
+    by it; when it has reached them all, its seed's other reachable cells not reached yet. Less, in both, those
+    its aimed builds have missed :data:`AIM_MISSES` times (the aims spread over the others); all unreached ones
+    when every one has."""
     unreached = [c for c in reach if c not in reached]
-    return [c for c in unreached if misses.get(c, 0) < AIM_MISSES] or unreached
+    own = set(own)
+    for cells in ([c for c in unreached if c in own], unreached):
+        aim = [c for c in cells if misses.get(c, 0) < AIM_MISSES]
+        if aim:
+            return aim
+    return unreached
 
 
 def count_misses(misses: dict[str, int], recs: list[dict[str, Any]]) -> None:
@@ -440,11 +478,9 @@ def count_misses(misses: dict[str, int], recs: list[dict[str, Any]]) -> None:
     and did not reach it. Counted at the end of each cycle and kept in the checkpoint, as the schedule's cells are,
     so a resumed job aims as the first run did."""
     for rec in recs:
-        mutation = rec.get("mutation") or ""
-        if mutation.startswith("aim "):
-            cell = mutation[4:].split(": ", 1)[0]
-            if cell not in (rec.get("cells") or ()):
-                misses[cell] = misses.get(cell, 0) + 1
+        cell = aimed_cell(rec)
+        if cell and cell not in (rec.get("cells") or ()):
+            misses[cell] = misses.get(cell, 0) + 1
 
 
 def _feedback_value(rec: dict[str, Any], mode: str) -> float:

@@ -396,25 +396,44 @@ def _end_heading(edge) -> float:
 
 # ------------------------------------------------------------------------------------------- a campaign
 def summarise(records: Iterable[Mapping[str, Any]], reach: Iterable[str]) -> dict[str, Any]:
-    """A campaign's coverage from its journal records: per cell how often it was reached, and in how many
-    executions that produced a finding or an incident; reachable, reached, unreached; per projection too."""
+    """A campaign's coverage from its journal records: per cell how often it was reached, in how many
+    executions that produced a finding or an incident, and how many executions the search aimed at it (their
+    ``mutation`` begins ``aim <cell>:``, :func:`aimed_cell`); reachable, reached, unreached; per projection too.
+    A cell never reached that was aimed at is one the search tried and missed; one never aimed at, one it did
+    not try (its job reached all it aimed at first, or the budget ended)."""
     reach = sorted(set(reach))
     hits: dict[str, dict[str, int]] = {}
+    aims: dict[str, int] = {}
     for rec in records:
         for c in rec.get("cells") or ():
             h = hits.setdefault(c, {"count": 0, "findings": 0, "incidents": 0})
             h["count"] += 1
             h["findings"] += bool(rec.get("finding"))
             h["incidents"] += bool(rec.get("incident"))
+        cell = aimed_cell(rec)
+        if cell:
+            aims[cell] = aims.get(cell, 0) + 1
     reached = [c for c in reach if c in hits]
     per = {}
     for name in PROJECTIONS:
         r = [c for c in reach if c.startswith(name + ":")]
         per[name] = {"reachable": len(r), "reached": sum(1 for c in r if c in hits)}
+    empty = {"count": 0, "findings": 0, "incidents": 0}
     return {"reachable": len(reach), "reached": len(reached),
             "share": round(len(reached) / len(reach), 4) if reach else 0.0,
-            "projections": per, "cells": {c: hits.get(c, {"count": 0, "findings": 0, "incidents": 0}) for c in reach},
+            "projections": per, "cells": {c: {**hits.get(c, empty), "aimed": aims.get(c, 0)} for c in reach},
             "outside": {c: h for c, h in sorted(hits.items()) if c not in set(reach)}}
+
+
+def aimed_cell(rec: Mapping[str, Any]) -> str | None:
+    """The cell an execution's mutation was aimed at (``"aim <cell>: ..."``), None when it was not aimed; a
+    record that :class:`JournalCells` keeps names it as ``aim``."""
+    if "aim" in rec:
+        return rec["aim"] if isinstance(rec["aim"], str) else None
+    mutation = rec.get("mutation")
+    if isinstance(mutation, str) and mutation.startswith("aim "):
+        return mutation[4:].split(": ", 1)[0]
+    return None
 
 
 def split(cell: str) -> tuple[str, str, str]:
@@ -470,7 +489,8 @@ class JournalCells:
                 if isinstance(rec, dict) and rec.get("event") == "end" and isinstance(rec.get("key"), str) \
                         and rec["key"] not in self.records:
                     self.records[rec["key"]] = {"cells": [c for c in rec.get("cells") or () if isinstance(c, str)],
-                                                "finding": rec.get("finding"), "incident": rec.get("incident")}
+                                                "finding": rec.get("finding"), "incident": rec.get("incident"),
+                                                "aim": aimed_cell(rec)}
                     new += 1
         return new
 
@@ -509,9 +529,13 @@ def format_coverage(cov: Mapping[str, Any]) -> str:
             if h["count"]:
                 marks = "".join(f"  {k[0].upper()}{h[k]}" for k in ("findings", "incidents") if h[k])
                 lines.append(f"  {h['count']:6d}  {c.split(':', 1)[1]}{marks}")
-        never = [c.split(":", 1)[1] for c, h in mine if not h["count"]]
-        if never:
-            lines.append(f"  never reached ({len(never)}): " + ", ".join(never))
+        never = [(c.split(":", 1)[1], h.get("aimed", 0)) for c, h in mine if not h["count"]]
+        tried = [f"{c} ({n})" for c, n in sorted(never, key=lambda cn: -cn[1]) if n]
+        untried = [c for c, n in never if not n]
+        if tried:
+            lines.append(f"  never reached, aimed at and missed ({len(tried)}; aimed executions): " + ", ".join(tried))
+        if untried:
+            lines.append(f"  never reached, never aimed at ({len(untried)}): " + ", ".join(untried))
     if cov.get("outside"):
         lines.append("")
         lines.append("reached but not derived as reachable (the derivation under-estimates here): "

@@ -55,7 +55,8 @@ def grid_html(cov: Mapping[str, Any], name: str) -> str:
             if h is None:
                 tds.append('<td class="na" title="not offered by the network and the seeds">&middot;</td>')
                 continue
-            title = f"{r} / {c}: reached {h['count']}x, findings {h['findings']}, incidents {h['incidents']}"
+            title = (f"{r} / {c}: reached {h['count']}x, findings {h['findings']}, incidents {h['incidents']}, "
+                     f"aimed at {h.get('aimed', 0)}x")
             if not h["count"]:
                 tds.append(f'<td class="never" title="{_e(title)}">0</td>')
                 continue
@@ -90,7 +91,7 @@ def section_md(cov: Mapping[str, Any] | None) -> list[str]:
            f"{cov['reached']}/{cov['reachable']} reachable cells reached ({100.0 * cov['share']:.0f} %).", ""]
     for name, (a, b) in PROJECTIONS.items():
         p = cov["projections"][name]
-        never = [split(c)[1] + " / " + split(c)[2] for c, h in cov["cells"].items()
-                 if c.startswith(name + ":") and not h["count"]]
+        never = [split(c)[1] + " / " + split(c)[2] + (f" (aimed {h['aimed']}x)" if h.get("aimed") else "")
+                 for c, h in cov["cells"].items() if c.startswith(name + ":") and not h["count"]]
         out.append(f"- {a} x {b}: {p['reached']}/{p['reachable']}" + (f"; never: {', '.join(never)}" if never else ""))
     return out + [""]
