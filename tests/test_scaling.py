@@ -44,7 +44,7 @@ def test_records_count_their_triage_reruns_and_simulated_seconds(tmp_path, town_
     assert [r["finding"].endswith("-speeding") for r in new].count(True) == 1
     for first in new:
         verdict = json.loads((tmp_path / "a" / first["finding"] / "verdict.json").read_text())
-        shrink_runs = (verdict.get("shrink") or {}).get("executions", 0)
+        shrink_runs = (verdict.get("shrink") or {}).get("runs", 0)  # its candidates less those judged without a run
         # the execution, its counterfactual and reproduction reruns (triage_execs), and the shrinking runs
         assert first["runs"] == 1 + first["triage_execs"] + shrink_runs > 1 + CFG["reproduce"]
     step = town_scenario.sim.step_length
