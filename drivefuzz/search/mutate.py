@@ -78,7 +78,7 @@ class MutationConfig(BaseModel):
                                 "instead of adding a component")
     catalogue_share: float = Field(default=0.5, ge=0.0, le=1.0, description="new components drawn from the "
                                    "situation catalogue (the rest by random placement)")
-    aim_share: float = Field(default=0.5, ge=0.0, le=1.0, description="new components aimed at an interaction-"
+    aim_share: float = Field(default=1.0, ge=0.0, le=1.0, description="new components aimed at an interaction-"
                              "coverage cell the job has not reached (when the job names them: guided feedback)")
     max_pedestrian_speed: float = Field(default=6 * MPH, gt=0.0, description="[m/s]")
     max_actors: int = Field(default=12, ge=0)
