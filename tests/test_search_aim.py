@@ -11,7 +11,8 @@ from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
 from drivefuzz.oracle import OracleSettings
 from drivefuzz.scenario import Weather
 from drivefuzz.scenario.roadmap import load_roadmap
-from drivefuzz.campaign.job import aim_cells, count_misses, share_cells
+from drivefuzz.campaign.job import BLOCKED_MISS, aim_cells, count_misses, share_cells
+from drivefuzz.search.aim import BLOCKED_LANE
 from drivefuzz.search.aim import _lateral, aimed, pick_cell
 from drivefuzz.search.effect import effect_hash
 from drivefuzz.search.mutate import MutationConfig, Mutator
@@ -159,6 +160,29 @@ def test_a_job_stops_aiming_at_a_cell_its_aims_keep_missing():
     assert aim_cells([a, b, c], set(), misses) == [b, c]
     assert aim_cells([a, b, c], {b}, misses) == [c]
     assert aim_cells([a, b, c], {b, c}, misses) == [a]  # every unreached cell missed K times: all of them again
+
+
+def test_a_job_stops_aiming_at_lane_changes_once_its_ego_keeps_waiting_behind_stopped_cars(mut, town_seeds):
+    """The reference ADS waits behind a stopped car with a free lane beside (a finding: it stayed behind a
+    stationary body with a lane free); every further lane change built around one repeats that finding."""
+    lc1, lc2 = "party-manoeuvre:vehicle/crossing_left|lane_change", "party-manoeuvre:none/grip|lane_change"
+    other = "party-element:vehicle/ahead|edge"
+    waited = {"mutation": f"aim {lc1}: {BLOCKED_LANE}: situation lead_stopped: stopped vehicle v0", "cells": [other]}
+    passed = {"mutation": f"aim {lc1}: {BLOCKED_LANE}: situation lead_stopped: stopped vehicle v0",
+              "cells": ["party-manoeuvre:vehicle/ahead|lane_change"]}  # it changed lanes, met another party
+    forced = {"mutation": f"aim {lc2}: situation grip: a patch", "cells": [other]}  # no stopped car: not counted
+    misses: dict[str, int] = {}
+    count_misses(misses, [waited, passed, forced, forced])
+    assert misses[BLOCKED_MISS] == 1 and misses[lc1] == 2 and misses[lc2] == 2
+    assert aim_cells([lc1, lc2, other], set(), misses) == [lc1, lc2, other]
+    count_misses(misses, [waited, waited])
+    assert aim_cells([lc1, lc2, other], set(), misses) == [other]
+    # seed 001's route forces no lane change: an aimed one is built around a stopped car, and says so
+    from drivefuzz.search.aim_place import lane_change_spots
+
+    assert not lane_change_spots(mut, town_seeds[1])
+    m, _ = aimed(mut, town_seeds[1], lc1, random.Random(0))
+    assert m.description.startswith(f"aim {lc1}: {BLOCKED_LANE}: "), m.description
 
 
 def test_a_campaign_shares_its_cells_among_its_seed_jobs(town_seeds):

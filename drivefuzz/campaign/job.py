@@ -63,6 +63,7 @@ import drivefuzz
 from drivefuzz.campaign.config import FuzzConfig
 from drivefuzz.oracle import Misbehavior
 from drivefuzz.storage import atomic_write_json, atomic_write_text
+from drivefuzz.search.aim import BLOCKED_LANE
 from drivefuzz.search.effect import effect_hash
 from drivefuzz.search.schedule import GUIDED
 from drivefuzz.triage.coverage import aimed_cell
@@ -75,6 +76,8 @@ STOP_FILE = "STOP"
 MAX_REDRAWS = 8
 #: a job stops aiming at a cell once this many of its aimed builds missed it (while it has other cells to aim at)
 AIM_MISSES = 3
+#: the misses of aimed lane changes around a stopped car, kept with the cells' (:func:`aim_cells`)
+BLOCKED_MISS = "lane_change around a stopped car"
 
 
 def job_dir(out: Path, seed_index: int) -> Path:
@@ -462,12 +465,15 @@ def share_cells(reaches: list[list[str]]) -> list[list[str]]:
 def aim_cells(reach, reached, misses: dict[str, int], own=()) -> list[str]:
     """The cells a job aims at: its share of the campaign's cells (``own``, :func:`share_cells`) not reached yet
     by it; when it has reached them all, its seed's other reachable cells not reached yet. Less, in both, those
-    its aimed builds have missed :data:`AIM_MISSES` times (the aims spread over the others); all unreached ones
-    when every one has."""
+    its aimed builds have missed :data:`AIM_MISSES` times (the aims spread over the others), and every lane-change
+    cell once that many lane changes around a stopped car ended with the ego still in its lane (an ADS that waits
+    behind a stopped car, as the reference ADS does, makes each of them one more execution of the same finding);
+    all unreached ones when every one has."""
     unreached = [c for c in reach if c not in reached]
     own = set(own)
+    waits = misses.get(BLOCKED_MISS, 0) >= AIM_MISSES
     for cells in ([c for c in unreached if c in own], unreached):
-        aim = [c for c in cells if misses.get(c, 0) < AIM_MISSES]
+        aim = [c for c in cells if misses.get(c, 0) < AIM_MISSES and not (waits and c.endswith("|lane_change"))]
         if aim:
             return aim
     return unreached
@@ -475,12 +481,17 @@ def aim_cells(reach, reached, misses: dict[str, int], own=()) -> list[str]:
 
 def count_misses(misses: dict[str, int], recs: list[dict[str, Any]]) -> None:
     """Add to ``misses`` the members of a cycle that were aimed at a cell (their ``mutation`` begins ``aim <cell>:``)
-    and did not reach it. Counted at the end of each cycle and kept in the checkpoint, as the schedule's cells are,
+    and did not reach it, and under :data:`BLOCKED_MISS` the lane changes around a stopped car in which the ego
+    changed no lane. Counted at the end of each cycle and kept in the checkpoint, as the schedule's cells are,
     so a resumed job aims as the first run did."""
     for rec in recs:
         cell = aimed_cell(rec)
-        if cell and cell not in (rec.get("cells") or ()):
+        cells = rec.get("cells") or ()
+        if cell and cell not in cells:
             misses[cell] = misses.get(cell, 0) + 1
+            if cell.endswith("|lane_change") and f": {BLOCKED_LANE}:" in rec.get("mutation", "") \
+                    and not any(c.endswith("|lane_change") for c in cells):
+                misses[BLOCKED_MISS] = misses.get(BLOCKED_MISS, 0) + 1
 
 
 def _feedback_value(rec: dict[str, Any], mode: str) -> float:

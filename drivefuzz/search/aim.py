@@ -58,6 +58,9 @@ TIMED = ("passes", "follower", "crossing", "oncoming", "grip")
 #: timing (the mutator's profile of the ego on an empty road) are off. One 1,000-execution town campaign each:
 #: all bare, cell hits 10 % and coverage 66.0 %; none bare, 8 % and 66.0 %: half and half keeps both kinds
 BARE_SHARE = 0.5
+#: how an aimed lane change around a stopped car says so (the job stops building them for an ADS that never passes
+#: one: :func:`drivefuzz.campaign.job.aim_cells`)
+BLOCKED_LANE = "a stopped car to pass"
 #: [m/s] bounds of the speed bands (drivefuzz.triage.coverage.SPEED_BANDS), by band name
 BANDS = {"0-10 km/h": (0.0, 2.8), "10-30 km/h": (2.8, 8.3), "30-60 km/h": (8.3, 16.7), "60+ km/h": (16.7, 99.0)}
 
@@ -144,7 +147,7 @@ def _blocked_lane(mut: Mutator, sc: Scenario, rng: random.Random) -> tuple[Scena
         return sc, None, ""
     a = m.scenario.actors[-1]
     d = _distance(mut, m.scenario, a.start_lane, a.start_pos)
-    return m.scenario, (None if d is None else max(d - rng.uniform(5.0, 25.0), 1.0)), m.description
+    return m.scenario, (None if d is None else max(d - rng.uniform(5.0, 25.0), 1.0)), f"{BLOCKED_LANE}: {m.description}"
 
 
 # ------------------------------------------------------------------------------------------- the route
