@@ -28,6 +28,7 @@ The paper's figure: 150 s per execution, 94 % of it in the simulator, 6 % in Dri
 Usage::
 
     python tools/bench_fuzz.py [--execs 60] [--strategy all] [--seed 0] [--seeds 4] [--population 4] [--out DIR]
+                               [--reproduce 5] [--shrink N]
                                [--ads NAME [--ads-option K=V]]   (e.g. --ads commonroad-reactive)
 
 Prints only; a benchmark, not a test.
@@ -75,6 +76,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, default=4, help="how many town seeds to fuzz [4]")
     ap.add_argument("--population", type=int, default=4)
     ap.add_argument("--reproduce", type=int, default=5, help="reruns of each new signature [5]")
+    ap.add_argument("--shrink", type=int, help="shrink budget of each new finding (fuzz --shrink) [the campaign's: 10]")
     ap.add_argument("--out", type=Path, help="keep the campaign directory here (default: a temporary one)")
     ap.add_argument("--ads", default="ego", help="the ADS under test [ego]; e.g. commonroad-reactive (its extra)")
     ap.add_argument("--ads-option", action="append", default=[], metavar="K=V", help="an option of that ADS")
@@ -91,7 +93,8 @@ def main(argv: list[str] | None = None) -> int:
     cycles = -(-args.execs // (len(seeds) * args.population))
     cfg = FuzzConfig(cycles=cycles, population=args.population, strategy=args.strategy, seed=args.seed,
                      max_execs=args.execs, continue_after_finding=True, reproduce=args.reproduce,
-                     ads=AdsSpec(name=args.ads, options=parse_kv(args.ads_option, "--ads-option")))
+                     ads=AdsSpec(name=args.ads, options=parse_kv(args.ads_option, "--ads-option")),
+                     **({} if args.shrink is None else {"shrink": args.shrink}))
     tmp = None
     out = args.out
     if out is None:
