@@ -206,6 +206,33 @@ def test_a_campaign_shares_its_cells_among_its_seed_jobs(town_seeds):
     assert aim_cells([a, b, c], set(), {c: 3}, own=[c]) == [a, b]  # its share missed K times: the others
 
 
+def test_an_oncoming_car_aimed_at_a_place_comes_by_there(mut, town_seeds):
+    """It used to meet the ego in the middle of a random route edge whatever the aimed place (a car aimed at the
+    ego waiting at C2's red light passed it 2.75 s after the start). Now it is on the road the other way of the
+    place's route edge, in the lane next to the centre line, level with the place when the ego is expected there."""
+    from drivefuzz.search import catalogue as cat
+    from drivefuzz.search.aim import oncoming
+
+    sc = town_seeds[0]
+    route = mut._route(sc)
+    checked = 0
+    for at in (60.0, 150.0, 250.0):
+        i, _, pos = cat._route_spot(mut, sc, at)
+        built = oncoming(mut, sc, random.Random(0), at=at)
+        if built is None:  # no road the other way there
+            continue
+        checked += 1
+        a = built[0][0]
+        lane = mut.rmap.lane(a.start_lane)
+        edge = mut.rmap.edge(route[i])
+        assert lane.getEdge().getToNode() == edge.getFromNode() and lane.getEdge().getFromNode() == edge.getToNode()
+        assert lane.getIndex() == max(ln.getIndex() for ln in lane.getEdge().getLanes() if ln.allows("passenger"))
+        level = lane.getLength() * (1.0 - pos / edge.getLength())
+        t_level = a.depart + (level - a.start_pos) / a.speed
+        assert abs(t_level - mut._ego_eta(sc, at)) <= 1.0 + 1e-6, (at, t_level)
+    assert checked >= 2
+
+
 def test_member_values_of_the_guided_feedbacks():
     assert member_value("risk", 0.5, 2.0, 1, 0.25) == pytest.approx(1.25)
     assert member_value("coverage", 0.5, 2.0, 2, 0.5) == pytest.approx(2.0005)  # the cells decide

@@ -260,7 +260,7 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
     if approach in ("rear_left", "rear_right"):  # from behind on the lane beside, passing close by
         return [_filtered(Situation("passes", "", partial(passes, at=at)), partial(_on_side, mut, sc, side))]
     if approach == "oncoming":
-        return [Situation("oncoming", "", oncoming),
+        return [Situation("oncoming", "", oncoming if at is None else partial(oncoming, at=at)),
                 Situation("crossing", "", partial(_crossing, want="oncoming", col=col, at=at))]
     return [Situation("crossing", "", partial(_crossing, want=approach, col=col, at=at))]  # crossing_left / _right
 
@@ -350,23 +350,35 @@ def follower(mut, sc, rng):
     return [a], [], {}, f"{a.id} follows the ego on {lane} from {pos:.1f} m at {speed:.1f} m/s, departing {depart} s"
 
 
-def oncoming(mut, sc, rng):
-    """A lawful vehicle on the road the other way, driving towards the ego (it passes close by)."""
+def oncoming(mut, sc, rng, at: float | None = None):
+    """A lawful vehicle on the road the other way, driving towards the ego (it passes close by): level with the
+    ego at the aimed place ``at`` [m along the route], on the lane next to the centre line (the one that passes
+    nearest an ego in its leftmost lane); without a place, level with it in the middle of a random route edge
+    with such a road, on any of its lanes."""
     route = mut._route(sc)
+    spot = None if at is None else cat._route_spot(mut, sc, at)
     options = []
     for i, e in enumerate(route):
+        if spot is not None and i != spot[0]:
+            continue
         edge = mut.rmap.edge(e)
         for o in edge.getToNode().getOutgoing():
             if o.getToNode() == edge.getFromNode() and mut.rmap.is_normal_edge(o):
                 options += [(i, ln) for ln in o.getLanes() if ln.allows(PASSENGER)]
     if not options:
         return None
-    i, lane = rng.choice(options)
+    if spot is None:
+        i, lane = rng.choice(options)
+        along = mut.rmap.route_length(route[:i + 1], sc.mission.start_pos) - mut.rmap.edge(route[i]).getLength() / 2
+        level = lane.getLength() / 2  # where it is level with the ego on its own lane
+    else:
+        i, lane = max(options, key=lambda o: o[1].getIndex())
+        along = at
+        level = lane.getLength() * (1.0 - spot[2] / mut.rmap.edge(route[i]).getLength())
     speed = round(lane_limit(mut, lane.getID()) * rng.uniform(0.6, 1.0), 2)
-    # the ego reaches the middle of route edge i at t_meet; the other starts as far from there as it drives
-    mid = mut.rmap.route_length(route[:i + 1], sc.mission.start_pos) - mut.rmap.edge(route[i]).getLength() / 2
-    t_meet = mut._ego_eta(sc, max(mid, 0.0)) + rng.uniform(-1.0, 1.0)
-    pos = round(lane.getLength() / 2 - speed * max(t_meet, 0.0), 2)
+    # the ego is level with that place at t_meet; the other starts as far before it as it drives by then
+    t_meet = mut._ego_eta(sc, max(along, 0.0)) + rng.uniform(-1.0, 1.0)
+    pos = round(level - speed * max(t_meet, 0.0), 2)
     depart = 0.0
     if pos < 1.0:  # too far: it departs later from its lane's start
         depart, pos = round((1.0 - pos) / speed, 1), 1.0
