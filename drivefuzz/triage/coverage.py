@@ -400,7 +400,8 @@ def summarise(records: Iterable[Mapping[str, Any]], reach: Iterable[str]) -> dic
     executions that produced a finding or an incident, and how many executions the search aimed at it (their
     ``mutation`` begins ``aim <cell>:``, :func:`aimed_cell`); reachable, reached, unreached; per projection too.
     A cell never reached that was aimed at is one the search tried and missed; one never aimed at, one it did
-    not try (its job reached all it aimed at first, or the budget ended)."""
+    not try (its job reached all it aimed at first, the budget ended, or the feedback aims at nothing: random,
+    paper)."""
     reach = sorted(set(reach))
     hits: dict[str, dict[str, int]] = {}
     aims: dict[str, int] = {}
