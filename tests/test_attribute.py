@@ -955,6 +955,8 @@ def test_every_rule_a_verdict_names_is_described():
     assert bug_class("collision/vehicle", "ego", "failed_to_yield") == (
         "collision/vehicle|ego|failed_to_yield", "collision/vehicle: it did not yield where its link must yield")
     assert bug_class("collision/vehicle", "ego", "") == ("collision/vehicle|ego", "collision/vehicle")
+    # a hang (no trace, no attribution) read "hang/hang (fault: )"
+    assert bug_class("hang/hang", "", "") == ("hang/hang|", "hang/hang (no trace: not attributed)")
     with pytest.raises(ValueError, match="not described"):
         Attribution(Fault.EGO, "x", {}, "a_rule_nobody_described")
 

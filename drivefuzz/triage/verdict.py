@@ -92,7 +92,8 @@ def bug_class(verdict: str, fault: str, rule: str) -> tuple[str, str]:
     """(key, title) of the likely bug behind a finding: its oracle/kind (``verdict``), fault and rule. A verdict
     that names no rule (one filed before verdicts recorded theirs) is a class of its oracle and kind alone."""
     what = RULES.get(rule)
-    tail = "" if fault == Fault.EGO.value else f" (fault: {fault})"  # an unclear finding is not the ego's yet
+    # an unclear finding is not the ego's yet; a crash, hang or plugin error has no trace, so no verdict to show
+    tail = "" if fault == Fault.EGO.value else f" (fault: {fault})" if fault else " (no trace: not attributed)"
     if what is None:
         return f"{verdict}|{fault}", verdict + tail
     return f"{verdict}|{fault}|{rule}", f"{verdict}: {what}{tail}"
