@@ -77,7 +77,8 @@ def section_html(cov: Mapping[str, Any] | None) -> str:
     legend = ('<p class="cov-legend"><span style="background:hsl(130,55%,60%)">n: reached n times</span>'
               '<span style="outline:2px solid #d62728">F: a finding came of it</span>'
               '<span style="box-shadow: inset 0 -3px 0 #ff7f0e">incident</span>'
-              '<span style="background:#ddd">0: never reached</span><span>&middot;: not offered</span></p>')
+              '<span style="background:#ddd">0: never reached</span><span>&middot;: not offered</span>'
+              '<span>hover a cell: how often the search aimed at it</span></p>')
     return (f"<h2>Interaction coverage</h2><p>{cov['reached']}/{cov['reachable']} reachable cells reached "
             f"({100.0 * cov['share']:.0f} %) over {cov.get('executions', 0)} executions; close encounters "
             "classified as docs/coverage.md says.</p>" + legend + "".join(grid_html(cov, n) for n in PROJECTIONS))
