@@ -105,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
         Campaign(out, seeds, cfg).run()
         total = time.perf_counter() - t0
         report(out / "index.sqlite", total, args, cfg)
-        triage_cost(out)
+        triage_cost(out, seeds[0].sim.step_length)
     finally:
         if tmp:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -161,9 +161,10 @@ def report(index: Path, total: float, args, cfg) -> None:
           f"(the paper: 6 %)")
 
 
-def triage_cost(out: Path) -> None:
+def triage_cost(out: Path, step: float) -> None:
     """What triage cost per new signature, in executions' worth (the goal: at most 15), and in what: the runs of
-    the careful driver and the reproduction, the shrink's, and the frames they simulated."""
+    the careful driver and the reproduction, the shrink's, and the frames they simulated (``step``: the seeds'
+    simulation step [s])."""
     recs = []
     for path in sorted((out / "jobs").glob("*/journal.jsonl")):
         recs += [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
@@ -180,15 +181,15 @@ def triage_cost(out: Path) -> None:
     # a record's runs and simulated seconds count its execution and every triage rerun, the shrink's included
     reruns = sum(r.get("runs", 1 + r["triage_execs"]) - 1 for r in new)
     replays = sum(r["triage_execs"] for r in new)
-    step = 0.05
-    frames = sum(round(r.get("sim_s", 0.0) / step) - (r.get("frames") or 0) for r in new)
+    extra = [round(r.get("sim_s", 0.0) / step) - (r.get("frames") or 0) for r in new]  # frames triage simulated
+    frames = sum(extra)
     print(f"triage: {len(new)} new signature(s), {reruns} reruns ({reruns / len(new):.1f} each: {replays} careful "
           f"driver and reproduction, {reruns - replays} shrink), {frames:,} frames; per new signature "
           f"{sum(t_new) / len(new):.2f} s = {sum(t_new) / len(new) / mean_exec:.1f} executions' worth (mean execution "
           f"{mean_exec:.3f} s); a repeat of a known signature {1000 * sum(t_hit) / len(t_hit):.1f} ms")
-    for r in new:
+    for r, n in zip(new, extra):
         print(f"  {r['signature']} {r.get('verdict', '?'):<28} {r.get('runs', 1) - 1:>3} reruns "
-              f"{round(r.get('sim_s', 0.0) / step) - (r.get('frames') or 0):>7,} frames {r['timings'].get('triage', 0.0):6.2f} s")
+              f"{n:>7,} frames {r['timings'].get('triage', 0.0):6.2f} s")
 
 
 if __name__ == "__main__":

@@ -133,7 +133,8 @@ class SeedJob:
         self.cfg = FuzzConfig.from_json(manifest["config"])
         self.run_id = manifest.get("run", 1)
         self._ticket = 0
-        self.seed = load_scenario(self.out / manifest["seeds"][seed_index])
+        self.seed_refs: list[str] = manifest["seeds"]  # the campaign's seeds, in seed-index order
+        self.seed = load_scenario(self.out / self.seed_refs[seed_index])
         self.journal = self.dir / "journal.jsonl"
         self.findings: list[str] = []
 
@@ -344,9 +345,8 @@ class SeedJob:
     def _own_cells(self, rmap, reach) -> list[str]:
         """The cells of :func:`share_cells` that fall to this job, from the manifest's seeds (all of one network
         in a campaign; a seed on another network offers none of this one's cells)."""
-        manifest = json.loads((self.out / "manifest.json").read_text())
         reaches = []
-        for i, ref in enumerate(manifest["seeds"]):
+        for i, ref in enumerate(self.seed_refs):
             sc = self.seed if i == self.si else load_scenario(self.out / ref)
             reaches.append(reach if i == self.si else
                            _seed_reachable(rmap, sc) if sc.network_path() == self.seed.network_path() else [])
