@@ -134,3 +134,32 @@ def test_a_damaged_checkpoint_is_rebuilt_from_the_journal(tmp_path, seeds):
         starts = [json.loads(line)["key"] for line in journal.splitlines() if '"event": "start"' in line]
         assert len(starts) == len(set(starts)) == 10, damage  # nothing that had run was run again
         _same_as_reference(out, ref)
+
+
+def test_a_resume_goes_on_with_the_round_robin_where_it_stopped(tmp_path, town_scenario):
+    """Two seeds, one lineage of two members each turn: stopped by --max-execs while the second seed's turn has
+    begun, a resume runs that turn first, then the first seed's next one, as one run without a stop does (it
+    started with the first seed again, whose next lineage then took the budget the second seed's was due)."""
+    from click.testing import CliRunner
+
+    from drivefuzz.cli import main
+
+    seeds = tmp_path / "seeds"
+    for i in range(2):
+        write_scenario(town_scenario.model_copy(update={"sim": SimOptions(time_limit=15.0)}), seeds / f"00{i}")
+    args = ["--cycles", "1", "--population", "2", "--continue-after-finding", "--shrink", "0"]
+
+    def fuzz(*more):
+        r = CliRunner().invoke(main, ["fuzz", str(TOWN), "--seeds", str(seeds), *args, *more])
+        assert r.exit_code in (0, 1), r.output
+
+    def keys(out):
+        return {json.loads(line)["key"] for path in (out / "jobs").glob("*/journal.jsonl")
+                for line in path.read_text().splitlines() if '"event": "end"' in line}
+
+    fuzz("-o", str(tmp_path / "a"), "--max-execs", "4")  # seed 0, its lineage (2), seed 1
+    assert keys(tmp_path / "a") == {"0/seed", "0/0/0/0", "0/0/0/1", "1/seed"}
+    fuzz("--resume", str(tmp_path / "a"), "--max-execs", "3")
+    fuzz("-o", str(tmp_path / "b"), "--max-execs", "7")
+    assert keys(tmp_path / "a") == keys(tmp_path / "b") == {"0/seed", "0/0/0/0", "0/0/0/1", "1/seed", "1/0/0/0",
+                                                            "1/0/0/1", "0/1/0/0"}

@@ -190,6 +190,8 @@ class Campaign:
         self.progress.started = time.monotonic()
         pending = [i for i in range(len(self.seeds)) if not (job_dir(self.out, i) / "summary.json").exists()]
         self.progress.jobs_done = len(self.seeds) - len(pending)
+        # the round robin goes on where it stopped (the job it stopped in first), as one run without a stop would
+        pending.sort(key=lambda i: (_lineages_done(self.out, i), i))
         return pending
 
     def poll(self, quiet: bool = False) -> int:
@@ -366,6 +368,15 @@ class Campaign:
         tag = f"{self.out.resolve().name}-{os.getpid()}"
         return client.submit(run_seed_job, str(self.out.resolve()), si,
                              key=f"drivefuzz-{tag}-seed{si:03d}-round{self._rounds[si]}", pure=False, retries=1)
+
+
+def _lineages_done(out: Path, si: int) -> int:
+    """How many lineages seed job ``si`` has finished, as its checkpoint says (0 without a readable one)."""
+    try:
+        sched = json.loads((job_dir(out, si) / "checkpoint.json").read_text())["schedule"]
+        return max(int(sched["lineages"]) - (sched.get("lineage") is not None), 0)
+    except (OSError, ValueError, TypeError, KeyError, RecursionError):
+        return 0
 
 
 def run_on_dask(client, work: list[tuple[Campaign, list[int]]], max_running: int | None = None) -> None:
