@@ -35,6 +35,15 @@ def town_seeds():
     return [read_scenario(p) for p in list_seeds(ROOT / "seeds" / "town")]
 
 
+@pytest.fixture(scope="module")
+def highway_seeds():
+    """The highway's committed seed scenarios (lanes of 3.5 m)."""
+    from drivefuzz.scenario.seed import list_seeds
+    from drivefuzz.scenario.sumofiles import read_scenario
+
+    return [read_scenario(p) for p in list_seeds(ROOT / "seeds" / "highway")]
+
+
 @pytest.fixture
 def town_scenario(town):
     from drivefuzz.scenario import Mission, Scenario, SimOptions

@@ -11,7 +11,8 @@ import pytest
 
 from drivefuzz.scenario import Actor, ActorKind, NavType
 from drivefuzz.scenario.roadmap import load_roadmap
-from drivefuzz.search.aim_place import follower_at, meeting, passes, profile_spots, shift_light, walker_from_left
+from drivefuzz.search.aim_place import (drawn_level, follower_at, meeting, passes, profile_spots, shift_light,
+                                        walker_from_left)
 from drivefuzz.search.fairness import inserted_within_reach, unfair
 from drivefuzz.search.mutate import Mutator
 from drivefuzz.search.risk import risk_score
@@ -161,6 +162,68 @@ def test_a_passing_car_meets_the_ego_from_its_rear_quarter(mut, town_seeds):
         met += any(p.startswith("vehicle/rear_") for p in parties)
     assert built >= 5
     assert met >= 2, (met, built)
+
+
+def _side_encounters(mut, seeds, build, rows):
+    """(built, met in one of ``rows``, the least body gap [m] of each met, collisions) over ``seeds``."""
+    built, met, gaps, crashes = 0, 0, [], 0
+    for k, sc in enumerate(seeds):
+        b = build(mut, sc, random.Random(k))
+        if b is None or unfair(mut, sc.model_copy(update={"actors": sc.actors + tuple(b[0])}), b[0][0]):
+            continue
+        built += 1
+        new = sc.model_copy(update={"actors": sc.actors + tuple(b[0])})
+        ex = execute(new)
+        r = risk_score(ex.trace)
+        parties = {classify(new, ex.trace, mut.rmap, a, f).party for a, f in close_encounters(r) if a == b[0][0].id}
+        if parties & set(rows):
+            met += 1
+            gaps.append(r.gap)
+        crashes += any(m.oracle == "collision" for m in ex.misbehaviors)
+    return built, met, gaps, crashes
+
+
+def test_a_car_drifting_in_its_lane_meets_the_ego_close_on_a_wide_highway(highway_seeds):
+    """On the highway's 3.5 m lanes a car passing in the lane beside keeps 1.65 m from the ego's body: no close
+    encounter (a rear quarter was aimed at 91 times in five campaigns and met 0 times). Drifting towards the
+    ego inside its own lane as the two are level, the passer and a slower car the ego draws level with come
+    within 1.5 m, from the rear quarter and from beside, and touch nobody."""
+    mut = Mutator(load_roadmap(highway_seeds[0].network_path()))
+    seeds = highway_seeds * 3
+    built, met, gaps, crashes = _side_encounters(mut, seeds, passes, ("vehicle/rear_left", "vehicle/rear_right"))
+    assert built >= 8 and met >= built // 2, (built, met)
+    assert all(0.3 < g < 1.5 for g in gaps) and crashes == 0, (gaps, crashes)
+    built, met, gaps, crashes = _side_encounters(mut, seeds, drawn_level, ("vehicle/left", "vehicle/right"))
+    assert built >= 8 and met >= built // 4, (built, met)
+    assert all(0.3 < g < 1.5 for g in gaps) and crashes == 0, (gaps, crashes)
+
+
+def test_a_drift_is_fair_only_inside_its_lane(mut, town_seeds):
+    """A nudge that keeps the car inside its lane takes none of the ego's room and may peak level with it; one
+    that reaches over the line still needs the room of a cut-in, and only an in-lane drift may be timed to its
+    peak."""
+    from drivefuzz.scenario import Maneuver, ManeuverAction, Trigger
+    from drivefuzz.scenario.model import in_lane
+
+    assert in_lane(0.65, 3.2) and not in_lane(0.66, 3.2) and in_lane(0.8, 3.5) and not in_lane(0.1, 1.9)
+    sc = town_seeds[0]
+    b = drawn_level(mut, sc, random.Random(1))
+    assert b is not None
+    car = b[0][0]
+    step = car.maneuvers[0]
+    assert step.trigger is Trigger.PEAK and step.action in (ManeuverAction.NUDGE_LEFT, ManeuverAction.NUDGE_RIGHT)
+    width = mut.rmap.lane(car.start_lane).getWidth()
+    assert in_lane(step.depth, width)
+
+    def with_step(**upd):
+        a = car.model_copy(update={"maneuvers": (step.model_copy(update=upd),)})
+        return unfair(mut, sc.model_copy(update={"actors": sc.actors + (a,)}), a)
+
+    assert with_step() is None
+    assert with_step(trigger=Trigger.GAP) is None  # in its lane: no room needed at any gap
+    deep = round(width / 2.0, 2)  # over the line
+    assert "timed to its peak" in with_step(depth=deep)
+    assert "needs" in with_step(depth=deep, trigger=Trigger.GAP)
 
 
 def test_a_follower_is_timed_to_the_place_and_fair(mut, town_seeds):

@@ -79,6 +79,9 @@ class Trigger(str, Enum):
     AFTER = "after"  # ``time`` s after the step before fired (after departing, for the first step)
     GAP = "gap"  # the actor's rear is ``at`` m ahead of the ego's front along the ego's heading (< 0: behind)
     HEADWAY = "headway"  # the same gap is ``at`` s of the ego's speed (at least 1 m/s)
+    #: a nudge inside the actor's own lane (:func:`in_lane`): deepest as the same gap is ``at`` m; it starts when
+    #: the gap, half its duration later at the closing speed of the moment, would be ``at``
+    PEAK = "peak"
 
 
 #: [m] how far an aborted lane change may reach sideways (a lane is about 3.5 m wide)
@@ -86,6 +89,19 @@ MAX_NUDGE = 2.5
 #: A careful driver's reaction [s] and firm braking [m/s^2] on a dry road, and the room [m] left over when it
 #: has braked for a vehicle that cut in: the yardstick of every fairness rule (search/fairness.py).
 CAREFUL_REACTION, CAREFUL_DECEL, CUT_IN_MARGIN = 0.75, 5.0, 5.0
+
+
+#: [m] the body width of every other car (SUMO's default passenger vType; drivefuzz's vTypes keep it)
+NPC_WIDTH = 1.8
+#: [m] what an in-lane drift leaves between the drifting car's side and its lane's line
+DRIFT_MARGIN = 0.05
+
+
+def in_lane(depth: float, lane_width: float, width: float = NPC_WIDTH) -> bool:
+    """Whether a nudge of ``depth`` [m] keeps a car of ``width`` (centred on a lane of ``lane_width``) inside its
+    own lane: a drift towards the line, not a lane change. It never enters the lane beside, so it needs no
+    room ahead of the ego (:func:`cut_in_gap`) and may happen level with it, as drivers drift in traffic."""
+    return depth <= (lane_width - width) / 2.0 - DRIFT_MARGIN + 1e-9
 
 
 def cut_in_gap(closing: float, duration: float) -> float:

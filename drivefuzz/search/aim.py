@@ -11,8 +11,8 @@ party is built to meet the ego there:
 
 - **party** (the rows of party x manoeuvre and party x element): a situation of the catalogue or a maneuver
   program that creates that party, from that side: a vehicle ahead (stopped, slower, braking, pulling out),
-  beside (riding beside, cutting in, nudging), in a rear quarter (passing close by from behind), behind (a
-  follower),
+  beside (drawn level with and drifting towards the ego inside its lane, cutting in, nudging), in a rear
+  quarter (passing close by from behind, drifting towards it as it comes level), behind (a follower),
   oncoming (on the road the other way, or a conflict at a junction from the opposite approach), crossing from
   the left or the right (a conflict at a junction from that side), a walker crossing from that side, a
   walker along the road, grip (a low-friction patch where the ego brakes or turns). A built actor is kept only
@@ -23,8 +23,8 @@ party is built to meet the ego there:
   vehicle-ahead situations that make the ego do that;
 - **speed x condition**: the weather that makes the condition hold (fog, rain, wind, a low sun ahead of
   the ego, a low-friction patch; ``clear`` clears them) and, where the ego's expected speed (the mutator's
-  profile of the route) is in the band, a vehicle ahead (up to 30 km/h) or a car passing close by, an oncoming
-  car or a crossing walker (from 30 km/h: the ego brakes for a vehicle ahead before the encounter).
+  profile of the route) is in the band, a vehicle ahead (up to 30 km/h) or a car passing close by (either
+  way in the lane beside), an oncoming car or a crossing walker (from 30 km/h: the ego brakes for a vehicle ahead before the encounter).
 
 Every actor still passes the fairness rules (:func:`drivefuzz.search.fairness.unfair`) and the separation:
 aiming changes what is drawn, never what is allowed. The cell drawn and the draws after it come from the
@@ -45,14 +45,14 @@ from drivefuzz.search import catalogue as cat
 from drivefuzz.search import programs as prog
 from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
-from drivefuzz.search.aim_place import (JUNCTION_COLUMNS, follower_at, lane_change_spots, meeting, passes,
-                                        walker_from_left)
+from drivefuzz.search.aim_place import (JUNCTION_COLUMNS, drawn_level, follower_at, lane_change_spots, meeting,
+                                        passes, walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 
 #: [m] an actor this far before a junction (along the ego's route) meets the ego at it
 NEAR_JUNCTION_M = 50.0
 #: builders that time their actor to the aimed place themselves (no filter on where it starts)
-TIMED = ("passes", "follower", "crossing", "oncoming", "grip")
+TIMED = ("passes", "drawn_level", "follower", "crossing", "oncoming", "grip")
 #: share of the aimed components built on the mission alone (the parent's actors, puddles and light shifts
 #: dropped): on a lineage's parent, with up to 12 actors that slow, stop and meet the ego first, the place and
 #: timing (the mutator's profile of the ego on an empty road) are off. One 1,000-execution town campaign each:
@@ -253,12 +253,13 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
         return pool
     if approach == "behind":
         return [Situation("follower", "", follower if at is None else partial(follower_at, at=at))]
-    if approach in ("left", "right"):
+    if approach in ("left", "right"):  # beside or ahead in the lane on that side, coming close
         keep = partial(_on_side, mut, sc, side)
-        return [_filtered(s, keep) for s in (*prog.PROGRAMS, *cat.SITUATIONS)
-                if s.name in ("beside", "aborted_lane_change", "cut_in", "squeeze")]
+        return [_filtered(s, keep) for s in (*prog.PROGRAMS, *cat.SITUATIONS, Situation(
+                    "drawn_level", "", partial(drawn_level, at=at, side=side)))
+                if s.name in ("aborted_lane_change", "cut_in", "squeeze", "drawn_level")]
     if approach in ("rear_left", "rear_right"):  # from behind on the lane beside, passing close by
-        return [_filtered(Situation("passes", "", partial(passes, at=at)), partial(_on_side, mut, sc, side))]
+        return [_filtered(Situation("passes", "", partial(passes, at=at, side=side)), partial(_on_side, mut, sc, side))]
     if approach == "oncoming":
         return [Situation("oncoming", "", oncoming if at is None else partial(oncoming, at=at)),
                 Situation("crossing", "", partial(_crossing, want="oncoming", col=col, at=at))]
@@ -414,8 +415,8 @@ def _condition(mut: Mutator, sc: Scenario, band: str, condition: str, rng: rando
         # at speed: a car passing close by in the lane beside or the other way, a walker crossing; the ego
         # brakes for a vehicle ahead before the encounter (measured on town: none of 23 such aims reached
         # 30-60 km/h, every one of them 10-30 km/h)
-        pool = [Situation("passes", "", passes), Situation("oncoming", "", oncoming),
-                *(s for s in prog.PROGRAMS if s.name == "beside")]
+        pool = [Situation("passes", "", passes), Situation("drawn_level", "", drawn_level),
+                Situation("oncoming", "", oncoming)]
         if mut._walkable(sc):
             pool.append(Situation("walker_crosses", "", partial(cat.walker_crosses, early=(-1.0, 1.5))))
     else:

@@ -22,12 +22,13 @@ only when their actor starts within 50 m before it. Never imports libsumo.
 
 from __future__ import annotations
 
+import math
 import random
 
 import numpy as np
 
-from drivefuzz.scenario import ActorKind, NavType, Scenario, SignalShift
-from drivefuzz.scenario.model import EGO_LENGTH
+from drivefuzz.scenario import ActorKind, Maneuver, NavType, Scenario, SignalShift, Trigger
+from drivefuzz.scenario.model import DRIFT_MARGIN, EGO_LENGTH, EGO_WIDTH, NPC_WIDTH
 from drivefuzz.scenario.signals import phase_starts, shiftable
 from drivefuzz.search import catalogue as cat
 from drivefuzz.search import programs as prog
@@ -153,14 +154,47 @@ def _lights(mut: Mutator, sc: Scenario) -> list[tuple[float, str, int]]:
     return out
 
 
-def passes(mut: Mutator, sc: Scenario, rng: random.Random, at: float | None = None):
+#: [m] the body gap aimed for at an in-lane drift's deepest (a close encounter is a gap under 1.5 m)
+DRIFT_GAP = (0.6, 1.2)
+#: [s] an in-lane drift, out and back
+DRIFT_S = (3.0, 5.0)
+#: [m] the drifting car's length: SUMO's default passenger car (its centre is level with the ego's at a gap of
+#: -(EGO_LENGTH + NPC_LENGTH) / 2 from the ego's front to its rear)
+NPC_LENGTH = 5.0
+
+
+def drift(mut: Mutator, ego_lane: str, lane, rng: random.Random) -> Maneuver | None:
+    """A drift of the car on ``lane`` towards the ego on ``ego_lane`` inside its own lane (out and back: the
+    executor needs no room for it, :func:`drivefuzz.scenario.model.in_lane`), deepest as the two are level
+    (:attr:`~drivefuzz.scenario.Trigger.PEAK`: the executor starts it by the real closing speed), that leaves a
+    body gap of :data:`DRIFT_GAP` where the lanes allow it. None where its lane leaves no room."""
+    e = mut.rmap.lane(ego_lane)
+    room = (lane.getWidth() - NPC_WIDTH) / 2.0 - DRIFT_MARGIN
+    if room < 0.1:
+        return None
+    apart = (lane.getWidth() + e.getWidth()) / 2.0 - (NPC_WIDTH + EGO_WIDTH) / 2.0  # the body gap, both centred
+    depth = math.floor(100.0 * min(max(apart - rng.uniform(*DRIFT_GAP), 0.1), room)) / 100.0  # in lane, rounded
+    _, nudge = prog._toward(lane, e)
+    return Maneuver(time=0.5, action=nudge, value=round(rng.uniform(*DRIFT_S), 2), trigger=Trigger.PEAK, depth=depth,
+                    at=round(-(EGO_LENGTH + NPC_LENGTH) / 2.0 + rng.uniform(-1.0, 1.0), 1))
+
+
+def _lanes_beside(mut: Mutator, ego_lane: str, side: str | None) -> list:
+    """The lanes beside ``ego_lane`` that cars use, on ``side`` (``left``, ``right``; None: either)."""
+    i = mut.rmap.lane(ego_lane).getIndex()
+    return [ln for ln in prog._beside(mut, ego_lane)
+            if side is None or (ln.getIndex() > i) == (side == "left")]
+
+
+def passes(mut: Mutator, sc: Scenario, rng: random.Random, at: float | None = None, side: str | None = None):
     """From behind on the lane beside, faster than the ego: it draws level with the ego's rear where the ego is
     expected at ``at`` (else, in 7 of 10 draws the slowest of 8 places drawn along the route: a start, a turn, a
-    light, where the speed difference is large; else one of them) and passes close by on its own lane (lanes
-    of 3.2 m leave 1.4 m between the bodies): 2 s before the closest moment it is still behind the ego's rear,
-    in its rear quarter. (An overtaker that cuts in meets the ego ahead of it, after it has passed: no
-    rear-quarter encounter.) A maneuver vehicle without steps: SUMO drives it at its speed (at most 1.2 x the
-    lane's limit), stopping at lights and for what is ahead of it."""
+    light, where the speed difference is large; else one of them) and passes close by, drifting towards the ego
+    inside its own lane as it comes level (:func:`drift`: lanes of 3.5 m leave 1.65 m between centred bodies, no
+    close encounter): 2 s before the closest moment it is still behind the ego's rear, in its rear quarter. (An
+    overtaker that cuts in meets the ego ahead of it, after it has passed: no rear-quarter encounter.) A maneuver
+    vehicle: SUMO drives it at its speed (at most 1.2 x the lane's limit), stopping at lights and for what is
+    ahead of it. ``side``: the lane beside on that side only."""
     goal = _goal(mut, sc)
     if goal < 20.0:
         return None
@@ -168,12 +202,12 @@ def passes(mut: Mutator, sc: Scenario, rng: random.Random, at: float | None = No
     options = []
     for d in draws:
         spot = cat._route_spot(mut, sc, d)
-        if spot is not None and prog._beside(mut, spot[1]):
+        if spot is not None and _lanes_beside(mut, spot[1], side):
             options.append((prog._ego_speed(mut, sc, d) / lane_limit(mut, spot[1]), d, spot))
     if not options:
         return None
     _, d, (_, ego_lane, pos) = min(options) if rng.random() < 0.7 else rng.choice(options)
-    lane = rng.choice(prog._beside(mut, ego_lane))
+    lane = rng.choice(_lanes_beside(mut, ego_lane, side))
     v_ego = prog._ego_speed(mut, sc, d)
     speed = round(min(prog.SPEED_SHARE[1] * lane_limit(mut, lane.getID()), v_ego + rng.uniform(4.0, 9.0)), 2)
     lead = rng.uniform(3.0, 7.0)  # [s] it drives before it draws level
@@ -184,9 +218,50 @@ def passes(mut: Mutator, sc: Scenario, rng: random.Random, at: float | None = No
         start, depart = start - speed * depart, 0.0
     if start < 1.0:
         return None
-    a = prog._vehicle(mut, sc, lane, round(start, 2), speed, round(depart, 1), [])
+    step = drift(mut, ego_lane, lane, rng)
+    a = prog._vehicle(mut, sc, lane, round(start, 2), speed, round(depart, 1), [step] if step else [])
     return [a], [], {}, (f"{a.id} passes the ego from behind on {lane.getID()} at {speed:.1f} m/s, level with it "
-                         f"at {pos:.0f} m ({t_level:.1f} s)")
+                         f"at {pos:.0f} m ({t_level:.1f} s)" + (f", drifting {step.depth} m towards it" if step else ""))
+
+
+def drawn_level(mut: Mutator, sc: Scenario, rng: random.Random, at: float | None = None, side: str | None = None):
+    """Ahead on the lane beside and slower than the ego, which draws level with it where the ego is expected at
+    ``at`` (or up to 15 m either side of it, where the lane beside begins too near to start it there; without
+    ``at``, at a place drawn on the route); it drifts towards the ego inside its own lane as the two are level
+    (:func:`drift`). 2 s before the closest moment it is beside or ahead of the ego in the other lane (on
+    ``side`` only, where given). None where the ego is expected too slow there (under 4 m/s) to pass it."""
+    goal = _goal(mut, sc)
+    if goal < 20.0:
+        return None
+    draws = [at - 0.5, at - 15.0, at + 15.0] if at is not None else [rng.uniform(10.0, 0.8 * goal) for _ in range(4)]
+    lead = rng.uniform(2.5, 6.0)  # [s] it drives before the ego draws level
+    slower = rng.uniform(0.15, 0.4)  # share of the ego's expected speed (the ADS may well drive slower than that)
+    for d in draws:
+        spot = cat._route_spot(mut, sc, max(d, 0.0))
+        v_ego = prog._ego_speed(mut, sc, max(d, 0.0))
+        lanes = _lanes_beside(mut, spot[1], side) if spot is not None and v_ego >= 4.0 else []
+        if not lanes:
+            continue
+        _, ego_lane, pos = spot
+        lane = rng.choice(lanes)
+        speed = round(min(v_ego * (1.0 - slower), v_ego - 2.0), 2)
+        t_level = mut._ego_eta(sc, max(d, 0.0))
+        front = min(pos + (NPC_LENGTH - EGO_LENGTH) / 2.0, lane.getLength() - 0.5)  # level: the centres abreast
+        start, depart = front - speed * lead, t_level - lead
+        if depart < 0.0:
+            start, depart = start - speed * depart, 0.0
+        # it starts ahead of the ego (its rear 5 m before the ego's front), or it would pass the ego first
+        ahead = d - (front - start) - NPC_LENGTH - mut._ego_progress(sc, depart)
+        if start >= 1.0 and ahead >= 5.0:
+            break
+    else:
+        return None
+    step = drift(mut, ego_lane, lane, rng)
+    if step is None:
+        return None
+    a = prog._vehicle(mut, sc, lane, round(start, 2), speed, round(depart, 1), [step])
+    return [a], [], {}, (f"{a.id} on {lane.getID()} at {speed:.1f} m/s is drawn level with at {pos:.0f} m "
+                         f"({t_level:.1f} s) and drifts {step.depth} m towards the ego")
 
 
 def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):

@@ -529,7 +529,7 @@ class Mutator(RoutePlacement):
         of its parameters (speed, duration, braking rate, nudge depth) moved; fairness is checked after."""
         aspect = rng.choice(["timing", "parameter"])
         if aspect == "timing":
-            if m.trigger is Trigger.GAP:
+            if m.trigger in (Trigger.GAP, Trigger.PEAK):
                 return m.model_copy(update={"at": round(m.at + rng.uniform(-5.0, 5.0), 1)})
             if m.trigger is Trigger.HEADWAY:
                 return m.model_copy(update={"at": round(max(m.at + rng.uniform(-0.5, 0.5), 0.1), 2)})

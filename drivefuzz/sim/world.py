@@ -16,7 +16,7 @@ import numpy as np
 from drivefuzz.ads import OBSERVATION_RADIUS, ObjectState
 from drivefuzz.oracle import Obstacle
 from drivefuzz.scenario import ActorKind, Maneuver, ManeuverAction, NavType, Scenario, Trigger
-from drivefuzz.scenario.model import CAREFUL_DECEL, CAREFUL_REACTION, cut_in_gap
+from drivefuzz.scenario.model import CAREFUL_DECEL, CAREFUL_REACTION, cut_in_gap, in_lane
 from drivefuzz.sim.trace import Recorder
 
 #: POI/polygon types the collision oracle treats as solid (a user's polygon file may use them).
@@ -244,7 +244,11 @@ class ActorDriver:
         if abs(lateral) > TRIGGER_LATERAL:
             return False
         _, _, ch, sh, speed, _ = ego
-        value, tol = (gap, GAP_TOLERANCE) if m.trigger is Trigger.GAP else (gap / max(speed, 1.0), HEADWAY_TOLERANCE)
+        closing = speed - self.sim.vehicle.getSpeed(vid) * math.cos(h - math.atan2(sh, ch))
+        if m.trigger is Trigger.PEAK:  # the gap half the nudge later, at this closing speed
+            value, tol = gap - closing * m.value / 2.0, GAP_TOLERANCE
+        else:
+            value, tol = (gap, GAP_TOLERANCE) if m.trigger is Trigger.GAP else (gap / max(speed, 1.0), HEADWAY_TOLERANCE)
         if m.action is ManeuverAction.SPEED:  # ahead of the ego, and the ego at ``at`` or nearer
             return gap > 0.0 and value <= m.at
         above = value > m.at
@@ -254,10 +258,12 @@ class ActorDriver:
         lane = self.sim.vehicle.getLaneID(vid)
         if not p.armed or not lane or lane.startswith(":"):  # no lane change inside a junction: after it
             return False
+        if m.action in (ManeuverAction.NUDGE_LEFT, ManeuverAction.NUDGE_RIGHT) and in_lane(
+                m.depth, self.sim.lane.getWidth(lane), self.sim.vehicle.getWidth(vid)):
+            return True  # a drift inside its own lane takes none of the ego's room
         # fair by construction: never into less room than a careful driver needs at the real closing speed
         # (the NPC may be slower than its program says: stopped at the end of a merge lane, in a queue)
-        closing = speed - self.sim.vehicle.getSpeed(vid) * math.cos(h - math.atan2(sh, ch))
-        return gap >= cut_in_gap(closing, max(m.value, self.dt))
+        return m.trigger is not Trigger.PEAK and gap >= cut_in_gap(closing, max(m.value, self.dt))
 
     def _start(self, vid: str, m: Maneuver, p: _Program, t: float) -> None:
         sim = self.sim
