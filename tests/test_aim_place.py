@@ -255,3 +255,30 @@ def test_a_walker_from_the_left_starts_left_of_the_ego(mut, town_seeds):
         assert math.hypot(dx, dy) > 3.0
         built += 1
     assert built >= 4
+
+
+def test_the_profile_takes_the_pace_the_ads_was_seen_driving(highway_seeds, town_seeds):
+    """On the highway the reference ADS drives 11-16 m/s where the empty-road model says 31: its aims came seconds
+    early. A job journals the seed run's metres driven and the mutator times the mission by them; a scenario that
+    shifts a light keeps the model (the run waited at the lights as they were)."""
+    from drivefuzz.campaign.job import TRAVEL_EVERY_S, ego_travel
+    from drivefuzz.scenario import SignalShift
+
+    sc = highway_seeds[2]
+    mut = Mutator(load_roadmap(sc.network_path()))
+    ex = execute(sc)
+    goal = mut.rmap.route_length(mut._route(sc), sc.mission.start_pos, sc.mission.goal_pos)
+    t_run = ex.trace.n_frames * ex.trace.step_length  # it ends stopped at the goal (creeping the last metres)
+    model = mut._ego_eta(sc, goal)
+    mut.observe(sc, ego_travel(ex.trace), TRAVEL_EVERY_S)
+    seen = mut._ego_eta(sc, goal)
+    assert abs(model - t_run) > 10.0 and abs(seen - t_run) < 0.25 * abs(model - t_run), (seen, model, t_run)
+
+    town = town_seeds[0]
+    tmut = Mutator(load_roadmap(town.network_path()))
+    run = execute(town)
+    shifted = town.model_copy(update={"signals": (SignalShift(tls="C2", shift=20.0),)})
+    before = [tmut._ego_eta(x, 150.0) for x in (town, shifted)]
+    tmut.observe(town, ego_travel(run.trace), TRAVEL_EVERY_S)
+    assert tmut._ego_eta(shifted, 150.0) == before[1]
+    assert tmut._ego_eta(town, 150.0) != before[0]

@@ -163,3 +163,8 @@ def test_a_resume_goes_on_with_the_round_robin_where_it_stopped(tmp_path, town_s
     fuzz("-o", str(tmp_path / "b"), "--max-execs", "7")
     assert keys(tmp_path / "a") == keys(tmp_path / "b") == {"0/seed", "0/0/0/0", "0/0/0/1", "1/seed", "1/0/0/0",
                                                             "1/0/0/1", "0/1/0/0"}
+    # each seed's run journals how far its ego drove (the mutator times aimed actors by it, on a resume too)
+    seed_runs = [json.loads(line) for path in (tmp_path / "a" / "jobs").glob("*/journal.jsonl")
+                 for line in path.read_text().splitlines() if '"key": "0/seed"' in line or '"key": "1/seed"' in line]
+    travel = [r["ego_travel"] for r in seed_runs if r["event"] == "end"]
+    assert len(travel) == 2 and all(t[0] == 0.0 and t[-1] > 50.0 and t == sorted(t) for t in travel)

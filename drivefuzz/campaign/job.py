@@ -282,6 +282,9 @@ class SeedJob:
             ckpt["baseline"] = rec.get("risk_detail")
             self._checkpoint(schedule, ckpt["baseline"])
         baseline = _baseline(ckpt["baseline"])
+        seed_rec = done.get(f"{self.si}/seed") or {}
+        if seed_rec.get("ego_travel"):  # the ADS under test's own pace times the aimed actors
+            mutator.observe(seed_sc, seed_rec["ego_travel"], TRAVEL_EVERY_S)
         # no wasted executions: what this job has run, by effect (drivefuzz.search.effect); the journal's records
         # come before any execution not yet run, so a resumed job avoids exactly what the first run avoided
         executed = {r["effect"] for r in done.values() if r.get("effect")} | {effect_hash(seed_sc)}
@@ -403,6 +406,8 @@ class SeedJob:
             if self.cfg.feedback in GUIDED and r.frame is not None and r.riskiest_actor is not None:
                 rec["situation"] = situation(scenario, ex.trace, store.rmap, r.frame, r.riskiest_actor)
             rec["cells"] = execution_cells(scenario, ex.trace, store.rmap, r)  # interaction coverage
+            if key.endswith("/seed"):  # how fast the ADS under test drives the mission (Mutator.observe)
+                rec["ego_travel"] = ego_travel(ex.trace)
             t_store = time.perf_counter()
             if ex.misbehaviors:
                 m = ex.misbehaviors[0]
@@ -499,6 +504,19 @@ def _feedback_value(rec: dict[str, Any], mode: str) -> float:
     if mode == "paper":
         return -float(rec["score"])
     return float(rec["risk"])
+
+
+#: [s] the seed run's metres driven are journalled at this interval (Mutator.observe)
+TRAVEL_EVERY_S = 0.5
+
+
+def ego_travel(trace) -> list[float]:
+    """[m] the ego drove from its start, every :data:`TRAVEL_EVERY_S` s of ``trace``."""
+    import numpy as np
+
+    d = np.concatenate([[0.0], np.cumsum(np.asarray(trace.ego["speed"], dtype=float)[:-1]) * trace.step_length])
+    k = max(int(round(TRAVEL_EVERY_S / trace.step_length)), 1)
+    return [round(float(x), 1) for x in d[::k]]
 
 
 def _baseline(detail: dict[str, Any] | None):

@@ -22,9 +22,13 @@ party is built to meet the ego there:
   and ``ramp`` / ``merge`` put it on such an edge; ``brake`` / ``stop_go`` / ``cruise`` also pick the
   vehicle-ahead situations that make the ego do that;
 - **speed x condition**: the weather that makes the condition hold (fog, rain, wind, a low sun ahead of
-  the ego, a low-friction patch; ``clear`` clears them) and, where the ego's expected speed (the mutator's
-  profile of the route) is in the band, a vehicle ahead (up to 30 km/h) or a car passing close by (either
-  way in the lane beside), an oncoming car or a crossing walker (from 30 km/h: the ego brakes for a vehicle ahead before the encounter).
+  the ego, a low-friction patch; ``clear`` clears them) and a party timed to a place where the ego's expected
+  speed (the mutator's profile of the route) is in the band (a car passing close by in the lane beside, either
+  way, a follower, an oncoming car), or a vehicle ahead (up to 30 km/h) or a crossing walker (from 30 km/h: the
+  ego brakes for a vehicle ahead before the encounter) near such a place.
+
+In a fuzz job the profile is the seed run's own pace (:meth:`drivefuzz.search.mutate.Mutator.observe`) wherever no
+light is shifted: the ADS under test, not a model of one, says when the ego gets where.
 
 Every actor still passes the fairness rules (:func:`drivefuzz.search.fairness.unfair`) and the separation:
 aiming changes what is drawn, never what is allowed. The cell drawn and the draws after it come from the
@@ -46,7 +50,7 @@ from drivefuzz.search import programs as prog
 from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
 from drivefuzz.search.aim_place import (JUNCTION_COLUMNS, drawn_level, follower_at, lane_change_spots, meeting,
-                                        passes, walker_from_left)
+                                        passes, profile_spots, walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 
 #: [m] an actor this far before a junction (along the ego's route) meets the ego at it
@@ -399,8 +403,10 @@ def _walker_along(mut, sc, rng):
 
 # ------------------------------------------------------------------------------------------- conditions
 def _condition(mut: Mutator, sc: Scenario, band: str, condition: str, rng: random.Random) -> tuple[Mutation, bool]:
-    """A vehicle ahead where the ego is expected at ``band``, under ``condition``'s weather (a low-friction
-    patch where it brakes or turns for ``low_friction``)."""
+    """An encounter where the ego is expected at ``band``, under ``condition``'s weather (a low-friction patch
+    where it brakes or turns for ``low_friction``): a party timed to a place where the mutator's profile has the
+    ego at that speed (a car passing close by in the lane beside, either way, a follower, an oncoming car), or a
+    situation that starts near such a place (a vehicle ahead up to 30 km/h, a crossing walker from 30 km/h)."""
     lo, hi = BANDS.get(band, (0.0, 99.0))
 
     def at_speed(actor) -> bool:
@@ -411,19 +417,33 @@ def _condition(mut: Mutator, sc: Scenario, band: str, condition: str, rng: rando
     if condition == "low_friction":
         m = add_situation(mut, sc, Situation("grip", "", cat.slippery_braking_zone), rng)
         return Mutation(m.scenario, f"aim speed-condition:{band}|{condition}: {m.description}", m.retries), False
+    # well inside the band where the route has such places (the reference ADS drives up to 15 % below the profile)
+    spots = profile_spots(mut, sc, "speed", (1.2 * lo, 0.9 * hi)) or profile_spots(mut, sc, "speed", (lo, hi))
+    at = rng.choice(spots) if spots else None
+    # timed to the place: at a standstill, a car passing close by or coming up behind meets the ego there (a
+    # vehicle ahead is met as the ego brakes for it, faster than it ends up); the builders without a place pick
+    # their own (a passer without one, the slowest of its draws: seldom the band asked for)
+    timed = [] if at is None else [Situation("passes", "", partial(passes, at=at)),
+                                   Situation("drawn_level", "", partial(drawn_level, at=at)),
+                                   Situation("follower", "", partial(follower_at, at=at)),
+                                   Situation("oncoming", "", partial(oncoming, at=at))]
     if lo >= BANDS["30-60 km/h"][0]:
-        # at speed: a car passing close by in the lane beside or the other way, a walker crossing; the ego
-        # brakes for a vehicle ahead before the encounter (measured on town: none of 23 such aims reached
-        # 30-60 km/h, every one of them 10-30 km/h)
-        pool = [Situation("passes", "", passes), Situation("drawn_level", "", drawn_level),
-                Situation("oncoming", "", oncoming)]
-        if mut._walkable(sc):
-            pool.append(Situation("walker_crosses", "", partial(cat.walker_crosses, early=(-1.0, 1.5))))
+        # at speed: the ego brakes for a vehicle ahead before the encounter (measured on town: none of 23 such
+        # aims reached 30-60 km/h, every one of them 10-30 km/h)
+        near = [Situation("walker_crosses", "", partial(cat.walker_crosses, early=(-1.0, 1.5)))] \
+            if mut._walkable(sc) else []
     else:
-        pool = [s for s in (*cat.SITUATIONS, *prog.PROGRAMS) if s.name in
+        near = [s for s in (*cat.SITUATIONS, *prog.PROGRAMS) if s.name in
                 ("lead_stopped", "lead_brakes", "brake_check", "slow_ahead", "lead_slower", "pulls_out")]
-    m = add_situation(mut, sc, _filtered(rng.choice(pool), at_speed if band != "0-10 km/h" else None), rng)
-    w = _weather(mut, sc, m.scenario, condition, rng, top=70.0 if lo >= BANDS["30-60 km/h"][0] else 100.0)
+    pick = rng.choice(timed + near) if timed + near else None
+    if pick is None:
+        return Mutation(sc, f"aim speed-condition:{band}|{condition}: nothing builds it on this mission"), False
+    keep = None if pick in timed or band == "0-10 km/h" else at_speed
+    m = add_situation(mut, sc, _filtered(pick, keep), rng)
+    # the reference ADS drives no faster than it can stop within what it sees: at fog 70 (40 m of range) under
+    # 60 km/h, at 45 (62 m) about 85 km/h
+    top = 45.0 if lo >= BANDS["60+ km/h"][0] else 70.0 if lo >= BANDS["30-60 km/h"][0] else 100.0
+    w = _weather(mut, sc, m.scenario, condition, rng, top=top)
     new = m.scenario.model_copy(update={"weather": w})
     return Mutation(new, f"aim speed-condition:{band}|{condition}: {m.description}; weather {condition}", m.retries), True
 

@@ -97,15 +97,19 @@ def _goal(mut: Mutator, sc: Scenario) -> float:
     return mut.rmap.route_length(mut._route(sc), sc.mission.start_pos, sc.mission.goal_pos)
 
 
-def profile_spots(mut: Mutator, sc: Scenario, col: str) -> list[float]:
-    """Route distances [m] (every 5 m, before 0.8 of the route) where the ego's profile does what ``col`` says."""
+def profile_spots(mut: Mutator, sc: Scenario, col: str, band: tuple[float, float] | None = None) -> list[float]:
+    """Route distances [m] (every 5 m, before 0.8 of the route) where the ego's profile does what ``col`` says
+    (``speed``: drives at ``band`` [m/s], lowest to highest)."""
     s, t = mut._ego_profile(sc)
     dt = np.maximum(np.diff(t), 1e-6)
     v = 1.0 / dt  # each step is 1 m driven
     a = np.diff(v, append=v[-1]) / dt
-    want = {"stop_go": v < 0.5, "accelerate": a > ACCEL, "brake": a < BRAKE,
-            "cruise": (np.abs(a) < 0.3) & (v > 3.0)}[col]
-    if col == "stop_go":  # a stop (a wait at a red light): the steps just before it count too
+    if col == "speed":
+        want = (v >= band[0]) & (v < band[1])
+    else:
+        want = {"stop_go": v < 0.5, "accelerate": a > ACCEL, "brake": a < BRAKE,
+                "cruise": (np.abs(a) < 0.3) & (v > 3.0)}[col]
+    if col == "stop_go" or (col == "speed" and band[0] <= 0.0):  # a stop: the steps just before it count too
         want = want | (np.concatenate([want[1:], [False]]))
     goal = 0.8 * _goal(mut, sc)
     picked = sorted({round(float(x) / 5.0) * 5.0 for x in s[:-1][want] if 1.0 <= x <= goal})
@@ -186,6 +190,25 @@ def _lanes_beside(mut: Mutator, ego_lane: str, side: str | None) -> list:
             if side is None or (ln.getIndex() > i) == (side == "left")]
 
 
+def run_up(mut: Mutator, lane: str, pos: float, speed: float, lead: float, t_at: float,
+           rng: random.Random) -> tuple[str, float, float] | None:
+    """(lane, position [m], departure [s]) of a car at ``speed`` that is at ``pos`` on ``lane`` at ``t_at`` [s]
+    after driving ``lead`` s (less where ``t_at`` is sooner: it starts further on at 0 s); where that run-up is
+    longer than the lane before ``pos``, it starts upstream, on a lane that leads into ``lane`` (the highway's
+    edges after a ramp are 60-130 m long: a car at 30 m/s for 3 s does not fit on one). None where no road is
+    long enough."""
+    lead = min(lead, t_at)
+    back = speed * lead
+    if pos - back >= 1.0:
+        return lane, round(pos - back, 2), round(t_at - lead, 1)
+    placed = mut._upstream(lane, pos, back, rng)
+    if placed is None:
+        return None
+    up_lane, up_pos, covered = placed
+    depart = t_at - covered / max(speed, 0.1)
+    return (up_lane, up_pos, round(depart, 1)) if depart >= 0.0 else None
+
+
 def passes(mut: Mutator, sc: Scenario, rng: random.Random, at: float | None = None, side: str | None = None):
     """From behind on the lane beside, faster than the ego: it draws level with the ego's rear where the ego is
     expected at ``at`` (else, in 7 of 10 draws the slowest of 8 places drawn along the route: a start, a turn, a
@@ -212,14 +235,13 @@ def passes(mut: Mutator, sc: Scenario, rng: random.Random, at: float | None = No
     speed = round(min(prog.SPEED_SHARE[1] * lane_limit(mut, lane.getID()), v_ego + rng.uniform(4.0, 9.0)), 2)
     lead = rng.uniform(3.0, 7.0)  # [s] it drives before it draws level
     t_level = mut._ego_eta(sc, max(d - 0.5, 0.0)) + (rng.uniform(0.0, 4.0) if v_ego < 1.0 else 0.0)
-    start = min(pos, lane.getLength() - 0.5) - EGO_LENGTH - speed * lead  # its front at the ego's rear
-    depart = t_level - lead
-    if depart < 0.0:  # it would have to start earlier: from the start, further on
-        start, depart = start - speed * depart, 0.0
-    if start < 1.0:
+    # its front at the ego's rear
+    placed = run_up(mut, lane.getID(), min(pos, lane.getLength() - 0.5) - EGO_LENGTH, speed, lead, t_level, rng)
+    if placed is None:
         return None
+    start_lane, start, depart = placed
     step = drift(mut, ego_lane, lane, rng)
-    a = prog._vehicle(mut, sc, lane, round(start, 2), speed, round(depart, 1), [step] if step else [])
+    a = prog._vehicle(mut, sc, mut.rmap.lane(start_lane), start, speed, depart, [step] if step else [])
     return [a], [], {}, (f"{a.id} passes the ego from behind on {lane.getID()} at {speed:.1f} m/s, level with it "
                          f"at {pos:.0f} m ({t_level:.1f} s)" + (f", drifting {step.depth} m towards it" if step else ""))
 
@@ -285,14 +307,12 @@ def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
     else:
         lead = rng.uniform(4.0, 8.0)
         speed = round(min(prog.SPEED_SHARE[1] * limit, v_ego + rng.uniform(3.0, 6.0)), 2)
-    start = pos - EGO_LENGTH - 2.0 - speed * lead
-    depart = t_meet - lead
-    if depart < 0.0:
-        start, depart = start - speed * depart, 0.0
-    if start < 1.0:
+    placed = run_up(mut, lane, pos - EGO_LENGTH - 2.0, speed, lead, t_meet, rng)
+    if placed is None:
         return None
-    a = cat.Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=nav, start_lane=lane, start_pos=round(start, 2),
-                  speed=speed, depart=round(depart, 1), dest_edge=cat._dest(mut, sc))
+    start_lane, start, depart = placed
+    a = cat.Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=nav, start_lane=start_lane, start_pos=start,
+                  speed=speed, depart=depart, dest_edge=cat._dest(mut, sc))
     return [a], [], {}, f"{a.id} comes up behind the ego on {lane} at {speed:.1f} m/s, reaching it at ~{t_meet:.1f} s"
 
 

@@ -127,6 +127,7 @@ class Mutator(RoutePlacement):
         self._ego_lanes: dict[tuple[str, str], list[str]] = {}  # (start lane, goal edge) -> lane per route edge
         self._conflict_cache: dict[tuple, list] = {}
         self._profile_cache: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
+        self._observed: dict[tuple, tuple[np.ndarray, float]] = {}  # mission -> a run's metres driven (observe)
         self._walkable_cache: dict[tuple, bool] = {}
 
     # ---------------------------------------------------------------- helpers
