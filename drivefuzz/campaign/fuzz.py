@@ -6,7 +6,10 @@ write everything else themselves. With ``--jobs 1`` the jobs run one after anoth
 in this process; otherwise they run at once on Dask (:mod:`drivefuzz.campaign.cluster`),
 one simulation per worker process. Either way the client follows the jobs'
 journals to keep the index and the progress display current, and stops the jobs
-by creating ``STOP`` when the budget runs out or the user presses Ctrl-C.
+by creating ``STOP`` when the budget runs out or the user presses Ctrl-C. A ``--resume``
+starts the unfinished jobs in the order a run without the stop would have come to them (the
+fewest lineages finished first, the job the stop interrupted among them), so that a campaign
+stopped and resumed runs what one run of the summed budget runs.
 
 Output directory (a person opens it without drivefuzz)::
 
