@@ -23,9 +23,10 @@ no driver could get out of. After every placement, position, timing or speed cha
 - **cut-ins leave room**: a maneuver program's lane change or nudge is triggered by the gap or the headway to
   the ego (or by the clock, with SUMO's own safety gaps), and its gap leaves a careful driver room to react to
   the closing speed and brake (:func:`drivefuzz.scenario.model.cut_in_gap`; the executor holds back a lane
-  change whose real closing speed needs more); a nudge that keeps the car inside its own lane (a drift towards
-  the line, :func:`drivefuzz.scenario.model.in_lane`) takes none of the ego's room and may come level with it; a
-  program's vehicle that starts on a lane beside the ego's is
+  change whose real closing speed needs more); a nudge timed to its peak (``Trigger.PEAK``) must keep the car
+  inside its own lane (a drift towards the line, :func:`drivefuzz.scenario.model.in_lane`): it takes none of the
+  ego's room and may come level with it (a nudge timed by the gap keeps the rule above, as before); a program's
+  vehicle that starts on a lane beside the ego's is
   not a follower of the ego, and one that appears ahead of it later needs room only for the speed the ego
   must shed, not for a full stop;
 - **nobody enters within reach** (:func:`inserted_within_reach`): a vehicle (or a jaywalker) that departs later
@@ -222,10 +223,10 @@ def _program_unfair(mut: "Mutator", actor: Actor) -> str | None:
             continue
         if m.trigger is Trigger.AFTER:
             return f"step {k} ({m.action.value}) is timed by the step before, not by the gap to the ego"
-        if m.action in (ManeuverAction.NUDGE_LEFT, ManeuverAction.NUDGE_RIGHT) and in_lane(
-                m.depth, mut.rmap.lane(actor.start_lane).getWidth()):
-            continue  # a drift inside its own lane takes none of the ego's room
-        if m.trigger is Trigger.PEAK:
+        if m.trigger is Trigger.PEAK:  # a drift inside its own lane takes none of the ego's room
+            if m.action in (ManeuverAction.NUDGE_LEFT, ManeuverAction.NUDGE_RIGHT) and in_lane(
+                    m.depth, mut.rmap.lane(actor.start_lane).getWidth()):
+                continue
             return f"step {k} ({m.action.value}) is timed to its peak, which only a drift inside its lane may be"
         need = cut_in_gap(closing, m.value)
         if m.trigger is Trigger.GAP and m.at < need:

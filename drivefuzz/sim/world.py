@@ -258,12 +258,12 @@ class ActorDriver:
         lane = self.sim.vehicle.getLaneID(vid)
         if not p.armed or not lane or lane.startswith(":"):  # no lane change inside a junction: after it
             return False
-        if m.action in (ManeuverAction.NUDGE_LEFT, ManeuverAction.NUDGE_RIGHT) and in_lane(
-                m.depth, self.sim.lane.getWidth(lane), self.sim.vehicle.getWidth(vid)):
-            return True  # a drift inside its own lane takes none of the ego's room
+        if m.trigger is Trigger.PEAK:  # a drift inside its own lane takes none of the ego's room; anything else
+            return m.action in (ManeuverAction.NUDGE_LEFT, ManeuverAction.NUDGE_RIGHT) and in_lane(  # never starts
+                m.depth, self.sim.lane.getWidth(lane), self.sim.vehicle.getWidth(vid))
         # fair by construction: never into less room than a careful driver needs at the real closing speed
         # (the NPC may be slower than its program says: stopped at the end of a merge lane, in a queue)
-        return m.trigger is not Trigger.PEAK and gap >= cut_in_gap(closing, max(m.value, self.dt))
+        return gap >= cut_in_gap(closing, max(m.value, self.dt))
 
     def _start(self, vid: str, m: Maneuver, p: _Program, t: float) -> None:
         sim = self.sim
