@@ -75,6 +75,8 @@ class RoutePlacement:
     def observe(self, sc: Scenario, travelled: list[float], every: float) -> None:
         """The ego's metres driven from its start every ``every`` s of a run of ``sc``'s mission with the ADS under
         test, no light shifted: scenarios of that mission without light shifts are timed by it (:meth:`_ego_profile`)."""
+        if sc.signals:  # its run waited at shifted lights: it says nothing of the mission's own
+            return
         m = sc.mission
         key = (m.start_lane, m.start_pos, m.goal_edge, m.start_speed)
         self._observed[key] = (np.asarray(travelled, dtype=float), every)
