@@ -417,11 +417,11 @@ def _condition(mut: Mutator, sc: Scenario, band: str, condition: str, rng: rando
     if condition == "low_friction":
         m = add_situation(mut, sc, Situation("grip", "", cat.slippery_braking_zone), rng)
         return Mutation(m.scenario, f"aim speed-condition:{band}|{condition}: {m.description}", m.retries), False
-    # well inside the band where the route has such places (the reference ADS drives up to 15 % below the profile)
     if lo >= BANDS["30-60 km/h"][0]:
         # at speed the ego brakes for a vehicle ahead before the encounter (measured on town: none of 23 such aims
         # reached 30-60 km/h, every one of them 10-30 km/h): a party timed to a place inside the band (a passer
-        # without a place takes the slowest of its draws: seldom the band asked for), or a crossing walker
+        # without a place takes the slowest of its draws: seldom the band asked for), or a crossing walker; the place
+        # well inside the band where the route has one (the ADS may drive below the profile)
         spots = profile_spots(mut, sc, "speed", (1.2 * lo, 0.9 * hi)) or profile_spots(mut, sc, "speed", (lo, hi))
         at = rng.choice(spots) if spots else None
         timed = [] if at is None else [Situation("passes", "", partial(passes, at=at)),
