@@ -97,11 +97,16 @@ NPC_WIDTH = 1.8
 DRIFT_MARGIN = 0.05
 
 
+def drift_room(lane_width: float, width: float = NPC_WIDTH) -> float:
+    """[m] how far a car of ``width`` centred on a lane of ``lane_width`` may drift sideways inside it."""
+    return (lane_width - width) / 2.0 - DRIFT_MARGIN
+
+
 def in_lane(depth: float, lane_width: float, width: float = NPC_WIDTH) -> bool:
     """Whether a nudge of ``depth`` [m] keeps a car of ``width`` (centred on a lane of ``lane_width``) inside its
     own lane: a drift towards the line, not a lane change. It never enters the lane beside, so it needs no
     room ahead of the ego (:func:`cut_in_gap`) and may happen level with it, as drivers drift in traffic."""
-    return depth <= (lane_width - width) / 2.0 - DRIFT_MARGIN + 1e-9
+    return depth <= drift_room(lane_width, width) + 1e-9
 
 
 def cut_in_gap(closing: float, duration: float) -> float:

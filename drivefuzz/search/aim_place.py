@@ -28,7 +28,7 @@ import random
 import numpy as np
 
 from drivefuzz.scenario import ActorKind, Maneuver, NavType, Scenario, SignalShift, Trigger
-from drivefuzz.scenario.model import DRIFT_MARGIN, EGO_LENGTH, EGO_WIDTH, NPC_WIDTH
+from drivefuzz.scenario.model import EGO_LENGTH, EGO_WIDTH, NPC_WIDTH, drift_room
 from drivefuzz.scenario.signals import phase_starts, shiftable
 from drivefuzz.search import catalogue as cat
 from drivefuzz.search import programs as prog
@@ -173,7 +173,7 @@ def drift(mut: Mutator, ego_lane: str, lane, rng: random.Random) -> Maneuver | N
     (:attr:`~drivefuzz.scenario.Trigger.PEAK`: the executor starts it by the real closing speed), that leaves a
     body gap of :data:`DRIFT_GAP` where the lanes allow it. None where its lane leaves no room."""
     e = mut.rmap.lane(ego_lane)
-    room = (lane.getWidth() - NPC_WIDTH) / 2.0 - DRIFT_MARGIN
+    room = drift_room(lane.getWidth())
     if room < 0.1:
         return None
     apart = (lane.getWidth() + e.getWidth()) / 2.0 - (NPC_WIDTH + EGO_WIDTH) / 2.0  # the body gap, both centred

@@ -66,7 +66,7 @@ class RoutePlacement:
         if key in self._profile_cache:
             return self._profile_cache[key]
         seen = self._observed.get(key[:4]) if not sc.signals else None
-        s_route, t = self._model_profile(sc, key)
+        s_route, t = self._model_profile(sc)
         if seen is not None:
             t = _observed_times(t, *seen)
         self._profile_cache[key] = (s_route, t)
@@ -82,7 +82,7 @@ class RoutePlacement:
         self._observed[key] = (np.asarray(travelled, dtype=float), every)
         self._profile_cache = {k: v for k, v in self._profile_cache.items() if k[:4] != key}
 
-    def _model_profile(self, sc: Scenario, key: tuple) -> tuple[np.ndarray, np.ndarray]:
+    def _model_profile(self, sc: Scenario) -> tuple[np.ndarray, np.ndarray]:
         m = sc.mission
         cfg, rmap, route = self.cfg, self.rmap, self._route(sc)
         caps: list[np.ndarray] = []

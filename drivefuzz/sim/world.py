@@ -244,9 +244,11 @@ class ActorDriver:
         if abs(lateral) > TRIGGER_LATERAL:
             return False
         _, _, ch, sh, speed, _ = ego
-        closing = speed - self.sim.vehicle.getSpeed(vid) * math.cos(h - math.atan2(sh, ch))
+        def closing() -> float:  # [m/s] the ego closes in on it along the ego's heading
+            return speed - self.sim.vehicle.getSpeed(vid) * math.cos(h - math.atan2(sh, ch))
+
         if m.trigger is Trigger.PEAK:  # the gap half the nudge later, at this closing speed
-            value, tol = gap - closing * m.value / 2.0, GAP_TOLERANCE
+            value, tol = gap - closing() * m.value / 2.0, GAP_TOLERANCE
         else:
             value, tol = (gap, GAP_TOLERANCE) if m.trigger is Trigger.GAP else (gap / max(speed, 1.0), HEADWAY_TOLERANCE)
         if m.action is ManeuverAction.SPEED:  # ahead of the ego, and the ego at ``at`` or nearer
@@ -263,7 +265,7 @@ class ActorDriver:
                 m.depth, self.sim.lane.getWidth(lane), self.sim.vehicle.getWidth(vid))
         # fair by construction: never into less room than a careful driver needs at the real closing speed
         # (the NPC may be slower than its program says: stopped at the end of a merge lane, in a queue)
-        return gap >= cut_in_gap(closing, max(m.value, self.dt))
+        return gap >= cut_in_gap(closing(), max(m.value, self.dt))
 
     def _start(self, vid: str, m: Maneuver, p: _Program, t: float) -> None:
         sim = self.sim
