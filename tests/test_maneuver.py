@@ -264,3 +264,32 @@ def test_a_car_that_enters_late_behind_a_fast_ego_is_removed(tmp_path):
     assert ex.misbehaviors == () and ex.termination.value == "goal_reached"
     assert "v4" not in ex.trace.actors.ids
     assert {"v0", "v1", "v2", "v3"} <= set(ex.trace.actors.ids)
+
+
+def _time_gap(ex) -> float:
+    """[s] the follower v0's time gap to the ego at the end of the run (ego's rear to its front, at its speed)."""
+    t, x, _, v = track(ex)
+    ego_x = np.asarray(ex.trace.ego["x"])[-1]
+    gap = ego_x - 0.5 * float(ex.trace.meta.get("ego_length", 4.6)) - (x[-1] + 0.5 * 4.6)
+    return gap / v[-1]
+
+
+def test_a_follow_step_closes_the_gap_to_the_time_gap_it_asks_for():
+    """SUMO's follower keeps a time gap of 1 s (its tau) and 2.5 m more; a follow step of 0.5 s and 1 m halves the
+    gap, and fairness refuses one under MIN_FOLLOW_S or timed against the ego."""
+    from drivefuzz.scenario.model import MIN_FOLLOW_S
+
+    plain = execute(highway(npc("hw0_1", 1.0, 30.0), time_limit=25.0), oracles=[], stop_on_misbehavior=False)
+    close = execute(highway(npc("hw0_1", 1.0, 30.0, Maneuver(time=0.0, action="follow", value=0.5)),
+                            time_limit=25.0), oracles=[], stop_on_misbehavior=False)
+    # SUMO's gap is tau x speed plus minGap (2.5 m; 1 m for a follow step): 1.4 s and 0.7 s at the ego's 11.5 m/s
+    assert 1.2 < _time_gap(plain) < 1.6
+    assert 0.55 < _time_gap(close) < 0.8
+    mut = Mutator(load_roadmap(NET))
+    sc = highway()
+    ahead = ("hw0_0", 120.0, 20.0)  # a car ahead in the lane beside: fair without the step
+    assert unfair(mut, sc, npc(*ahead)) is None
+    assert unfair(mut, sc, npc(*ahead, Maneuver(time=0.0, action="follow", value=MIN_FOLLOW_S))) is None
+    assert "under the" in unfair(mut, sc, npc(*ahead, Maneuver(time=0.0, action="follow", value=0.3)))
+    assert "only the clock" in unfair(mut, sc, npc(*ahead, Maneuver(time=0.0, action="follow", value=0.6,
+                                                                    trigger=Trigger.GAP, at=-10.0)))

@@ -117,6 +117,39 @@ def test_crossing_ahead_of_the_ego_counts_the_ego_as_the_later_arrival():
     assert r.pet_frame is not None and r.pet_frame * DT < 10.0  # the ego's arrival
 
 
+def test_a_car_following_the_ego_through_a_turn_has_no_pet():
+    """A car that follows the ego's path 1 s behind through a 90-degree turn of 8 m radius is following, not
+    crossing: before, the ego's nodes a few metres along the bend headed 25 degrees and more away from the
+    follower's, and the follower had a "PET" of its time gap (a close encounter every time a car followed the
+    ego through a junction). A car crossing the bend's exit still has one."""
+    n, v, r = 400, 8.0, 8.0
+
+    def path(t):  # east along y = -r to x = 0, a quarter circle left about (0, 0), then north along x = r
+        s = v * t - 40.0  # [m] along the path from the start of the bend
+        arc = math.pi / 2 * r
+        x = np.where(s < 0, s, np.where(s < arc, r * np.sin(np.clip(s, 0, arc) / r), r))
+        y = np.where(s < 0, -r, np.where(s < arc, -r * np.cos(np.clip(s, 0, arc) / r), s - arc))
+        h = np.where(s < 0, 0.0, np.where(s < arc, np.clip(s, 0, arc) / r, math.pi / 2))
+        return x, y, h
+
+    t = np.arange(n) * DT
+    ex, ey, eh = path(t)
+    ego = {"t": t, "x": ex, "y": ey, "heading": eh, "speed": np.full(n, v), "vx": v * np.cos(eh),
+           "vy": v * np.sin(eh), "ax": np.zeros(n), "ay": np.zeros(n), "yaw_rate": np.zeros(n),
+           "mu_front": np.ones(n), "mu_rear": np.ones(n)}
+    fx, fy, fh = path(t - 1.0)
+    exit_y = 20.0  # a car crossing the northbound exit at y = 20 from the east, 0.6 s after the ego passed
+    t_ego = (40.0 + math.pi / 2 * r + exit_y) / v
+    cx = r + 12.0 - 10.0 * (t - (t_ego + 0.6 - 0.7))
+    actors = [car("follower", fx, fy, fh, np.full(n, v)),
+              car("cross", cx, np.full(n, exit_y), np.full(n, math.pi), np.full(n, 10.0))]
+    trace = trace_from_arrays(ego, {"step_length": DT, "ego_length": 4.6, "ego_width": 1.9}, actors)
+    r = risk_score(trace)
+    pets = {a: v for a, c, v, _ in r.encounters if c == "pet"}
+    assert "follower" not in pets, pets
+    assert pets.get("cross") is not None and pets["cross"] < 1.5
+
+
 # --------------------------------------------------------------------------- gap, grip, harsh
 def test_min_gap_is_exact_and_near_miss_outweighs_routine_harsh_braking():
     n = 2400  # two minutes of brake chatter at 6 m/s^2 with nothing near: counts nothing

@@ -206,6 +206,28 @@ def test_a_campaign_shares_its_cells_among_its_seed_jobs(town_seeds):
     assert aim_cells([a, b, c], set(), {c: 3}, own=[c]) == [a, b]  # its share missed K times: the others
 
 
+def test_a_crossing_car_is_timed_where_its_light_lets_it_through(mut, town_seeds):
+    """At a signalised crossing the cross stream's green is the ego's red: a crossing car timed to the ego by the
+    clock alone stopped at its light. Where the route also has a junction without a light, the crossing car is
+    built there; where every crossing is signalised, at one of them as before."""
+    from drivefuzz.scenario.signals import signal_state
+    from drivefuzz.search import catalogue as cat
+
+    sc = town_seeds[2]  # B1 (signalised; its cross stream is red when the ego comes), then B0 (no light)
+    conflicts = mut._conflicts(sc)
+    assert {o[5] for o in conflicts} == {"B0", "B1"}
+    b1 = [o for o in conflicts if o[5] == "B1"]
+    assert all(cat._light_stops(mut, sc, o[2], o[3], mut._ego_eta(sc, o[1])) for o in b1)
+    conn = next(c for c in mut.rmap.lane(b1[0][2]).getOutgoing() if c.getToLane().getEdge().getID() == b1[0][3])
+    assert signal_state(str(mut.rmap.path), conn.getTLSID(), conn.getTLLinkIndex(),
+                        mut._ego_eta(sc, b1[0][1])) in cat.STOP_STATES
+    built = [cat.crossing_traffic(mut, sc, random.Random(k)) for k in range(12)]
+    assert all(" at junction B0 " in b[3] for b in built if b) and sum(1 for b in built if b) >= 6
+    # seed 000 crosses at C2 alone, signalised: a crossing car is built there still
+    built = [cat.crossing_traffic(mut, town_seeds[0], random.Random(k)) for k in range(12)]
+    assert any(b and " at junction C2 " in b[3] for b in built)
+
+
 def test_an_oncoming_car_aimed_at_a_place_comes_by_there(mut, town_seeds):
     """It used to meet the ego in the middle of a random route edge whatever the aimed place (a car aimed at the
     ego waiting at C2's red light passed it 2.75 s after the start). Now it is on the road the other way of the

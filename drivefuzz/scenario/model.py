@@ -65,6 +65,9 @@ class ManeuverAction(str, Enum):
     LANE_RIGHT = "lane_right"  # change one lane to the right, taking ``value`` [s]
     NUDGE_LEFT = "nudge_left"  # an aborted lane change: ``depth`` [m] to the left and back, in ``value`` [s]
     NUDGE_RIGHT = "nudge_right"  # the same to the right
+    #: from now on, follow the vehicle ahead at a time gap of ``value`` [s] (SUMO's tau; its vType's is 1 s) and
+    #: :data:`FOLLOW_GAP` m at a standstill: a close follower, as many drivers are (clock triggers only)
+    FOLLOW = "follow"
 
 
 class Trigger(str, Enum):
@@ -86,6 +89,11 @@ class Trigger(str, Enum):
 
 #: [m] how far an aborted lane change may reach sideways (a lane is about 3.5 m wide)
 MAX_NUDGE = 2.5
+#: [s] the shortest time gap a ``follow`` step may keep to the vehicle ahead (drivers on motorways keep 0.5-1 s
+#: in dense traffic; under half a second is the reckless tail of the distribution) ...
+MIN_FOLLOW_S = 0.5
+#: ... and [m] the gap it keeps at a standstill (SUMO's minGap; its vType's is 2.5 m)
+FOLLOW_GAP = 1.0
 #: A careful driver's reaction [s] and firm braking [m/s^2] on a dry road, and the room [m] left over when it
 #: has braked for a vehicle that cut in: the yardstick of every fairness rule (search/fairness.py).
 CAREFUL_REACTION, CAREFUL_DECEL, CUT_IN_MARGIN = 0.75, 5.0, 5.0
@@ -122,7 +130,7 @@ class Maneuver(_Model):
     time: float = Field(ge=0.0, le=MAX_TIME, description="[s] see Trigger")
     action: ManeuverAction
     value: float = Field(ge=0.0, le=MAX_SPEED, description="[m/s] for speed, [s] duration for lane changes "
-                                                            "and nudges")
+                                                            "and nudges, [s] time gap for follow")
     trigger: Trigger = Trigger.TIME
     at: float = Field(default=0.0, ge=-1e3, le=1e3, description="[m] for gap, [s] for headway triggers")
     rate: float = Field(default=0.0, ge=0.0, le=12.0, description="[m/s^2] speed: how fast to reach the "

@@ -27,8 +27,8 @@ import random
 
 import numpy as np
 
-from drivefuzz.scenario import ActorKind, Maneuver, NavType, Scenario, SignalShift, Trigger
-from drivefuzz.scenario.model import EGO_LENGTH, EGO_WIDTH, NPC_WIDTH, drift_room
+from drivefuzz.scenario import ActorKind, Maneuver, ManeuverAction, NavType, Scenario, SignalShift, Trigger
+from drivefuzz.scenario.model import EGO_LENGTH, EGO_WIDTH, MIN_FOLLOW_S, NPC_WIDTH, drift_room
 from drivefuzz.scenario.signals import phase_starts, shiftable
 from drivefuzz.search import catalogue as cat
 from drivefuzz.search import programs as prog
@@ -39,6 +39,8 @@ from drivefuzz.search.mutate import Mutator
 EDGE_CLEAR_M = 35.0
 #: [m/s^2] the profile's acceleration above / below which the ego accelerates / brakes (coverage: 0.7, -1.0)
 ACCEL, BRAKE = 0.7, -1.0
+#: share of the followers built to close in, and [s] the time gaps they follow at (``follow`` steps)
+TAILGATE_SHARE, TAILGATE_S = 0.5, (MIN_FOLLOW_S, 0.9)
 JUNCTION_COLUMNS = ("signal/green", "signal/amber", "signal/red", "priority", "yield", "turn_left", "turn_right")
 
 
@@ -311,9 +313,16 @@ def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
     if placed is None:
         return None
     start_lane, start, depart = placed
+    # SUMO's follower keeps a time gap of 1 s and closes in at a time to collision of about 3.7 s, no close
+    # encounter; many drivers follow closer (a maneuver step: TAILGATE_S)
+    close = rng.random() < TAILGATE_SHARE
+    steps = (Maneuver(time=0.0, action=ManeuverAction.FOLLOW, value=round(rng.uniform(*TAILGATE_S), 2)),) if close \
+        else ()
     a = cat.Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=nav, start_lane=start_lane, start_pos=start,
-                  speed=speed, depart=depart, dest_edge=cat._dest(mut, sc))
-    return [a], [], {}, f"{a.id} comes up behind the ego on {lane} at {speed:.1f} m/s, reaching it at ~{t_meet:.1f} s"
+                  speed=speed, depart=depart, dest_edge=cat._dest(mut, sc), maneuvers=steps)
+    how = f", following at a time gap of {steps[0].value:.2f} s" if steps else ""
+    return [a], [], {}, (f"{a.id} comes up behind the ego on {lane} at {speed:.1f} m/s, reaching it at "
+                         f"~{t_meet:.1f} s{how}")
 
 
 def walker_from_left(mut: Mutator, sc: Scenario, rng: random.Random, early=(-1.0, 1.5)):

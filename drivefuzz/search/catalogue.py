@@ -19,7 +19,7 @@ from typing import Callable, NamedTuple
 
 from drivefuzz.scenario import Actor, ActorKind, Maneuver, ManeuverAction, NavType, Puddle, Scenario, SignalShift
 from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN
-from drivefuzz.scenario.signals import phase_starts, shiftable
+from drivefuzz.scenario.signals import phase_starts, shiftable, signal_state
 from drivefuzz.search.fairness import lane_limit, unfair
 from drivefuzz.search.mutate import Mutation, Mutator
 
@@ -227,9 +227,14 @@ def crossing_traffic(mut, sc, rng, keep=None):
     options = mut._conflicts(sc)
     if keep is not None:
         options = [o for o in options if keep(o)]
+    # where some can, a car whose light lets it through when the ego comes (at a signalised crossing the cross
+    # stream's green is the ego's red: a car timed to the ego by the clock alone stops at its light, and meets the
+    # ego only as a car waiting there); where none can, such a car is all there is
+    free = [o for o in options
+            if not _light_stops(mut, sc, o[2], o[3], mut._ego_eta(sc, o[1]) - o[4] / (0.8 * lane_limit(mut, o[2])))]
     if not options:
         return None
-    i, s_c, lane_id, dest, d_c, node, _, _ = rng.choice(options)
+    i, s_c, lane_id, dest, d_c, node, _, _ = rng.choice(free or options)
     t_meet = mut._ego_eta(sc, s_c) + rng.uniform(-1.0, 1.5)
     speed = round(lane_limit(mut, lane_id) * rng.uniform(0.6, 1.0), 2)
     lane_len = mut.rmap.lane(lane_id).getLength()
@@ -244,6 +249,21 @@ def crossing_traffic(mut, sc, rng, keep=None):
     a = Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.AUTOPILOT, start_lane=lane, start_pos=pos,
               speed=speed, dest_edge=dest)
     return [a], [], {}, f"{a.id} meets the ego at junction {node} at ~{t_meet:.1f} s ({speed:.1f} m/s)"
+
+
+#: link states at which a lawful driver arriving at the stop line stops (red, red-yellow; at yellow it may go on)
+STOP_STATES = "rRu"
+
+
+def _light_stops(mut, sc, lane_id: str, dest: str, t_line: float) -> bool:
+    """Whether a car on ``lane_id`` bound for ``dest`` finds its light red or yellow at its stop line at ``t_line``
+    [s] (the program as ``sc`` shifts it): it stops there. False where the link has no fixed-time light."""
+    conn = next((c for c in mut.rmap.lane(lane_id).getOutgoing() if c.getToLane().getEdge().getID() == dest), None)
+    if conn is None or not conn.getTLSID() or conn.getTLLinkIndex() < 0:
+        return False
+    shift = next((s.shift for s in sc.signals if s.tls == conn.getTLSID()), 0.0)
+    state = signal_state(str(mut.rmap.path), conn.getTLSID(), conn.getTLLinkIndex(), max(t_line, 0.0), shift)
+    return state is not None and state in STOP_STATES
 
 
 def slippery_braking_zone(mut, sc, rng):

@@ -14,7 +14,9 @@ routine driving (docs/feedback.md has the figures and the reasons):
 * **pet** [s]: post-encroachment time. Both bodies' paths are cut into occupation nodes
   (one per ``pet_node_m`` travelled, with the time span the body spent there); where an actor's
   rectangle came within ``pet_reach_m`` of the ego's rectangle at another time, crossing at
-  ``pet_min_angle_deg`` or more, the PET is the time between one leaving and the other arriving.
+  ``pet_min_angle_deg`` or more, the PET is the time between one leaving and the other arriving. A node
+  on the ego's own path (the ego's nearest node heads the actor's way) is following, not crossing: its
+  "PET" would be the time gap (TTC and the gap measure following).
   Same-direction traffic (following, being followed) is TTC's and the gap's business.
 * **gap** [m]: minimum rectangle-to-rectangle distance to any actor (0 on contact).
 * **grip** [-]: tyre-friction use ``sqrt(ax^2 + ay^2) / (mu g)`` with ``mu`` the lower of the two
@@ -452,9 +454,19 @@ def _pet(trace, e, cfg: RiskConfig) -> tuple[np.ndarray, np.ndarray]:
     ek, ak = es[i], as_[k]  # sample indices of the nodes' first samples
     j = aj[ak]
     feh = fe[ek]
-    near = np.hypot(ax_[ak] - e["x"][feh], ay_[ak] - e["y"][feh]) <= r_e + r_a[j] + margin
+    dist = np.hypot(ax_[ak] - e["x"][feh], ay_[ak] - e["y"][feh])
+    near = dist <= r_e + r_a[j] + margin
     dh = np.abs((ahd[ak] - e["h"][feh] + np.pi) % (2 * np.pi) - np.pi)
-    keep = near & (dh >= math.radians(cfg.pet_min_angle_deg))
+    crossing = dh >= math.radians(cfg.pet_min_angle_deg)
+    # a node of the actor's path on the ego's own path (the ego's nearest node heads its way) is following, not
+    # crossing: in a turn the ego's nodes a few metres on head 25 degrees and more away from it, and a car that
+    # followed the ego through the turn had a "PET" of its time gap (SUMO's 1 s: a close encounter each time)
+    on_path = np.zeros(len(as_), bool)
+    if len(k):
+        first = np.lexsort((dist, k))
+        first = first[np.r_[True, k[first][1:] != k[first][:-1]]]
+        on_path[k[first]] = ~crossing[first]
+    keep = near & crossing & ~on_path[k]
     i, k, ek, ak, j, feh = (v[keep] for v in (i, k, ek, ak, j, feh))
     if len(i) == 0:
         return pet, at

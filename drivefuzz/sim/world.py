@@ -16,7 +16,7 @@ import numpy as np
 from drivefuzz.ads import OBSERVATION_RADIUS, ObjectState
 from drivefuzz.oracle import Obstacle
 from drivefuzz.scenario import ActorKind, Maneuver, ManeuverAction, NavType, Scenario, Trigger
-from drivefuzz.scenario.model import CAREFUL_DECEL, CAREFUL_REACTION, cut_in_gap, in_lane
+from drivefuzz.scenario.model import CAREFUL_DECEL, CAREFUL_REACTION, FOLLOW_GAP, cut_in_gap, in_lane
 from drivefuzz.sim.trace import Recorder
 
 #: POI/polygon types the collision oracle treats as solid (a user's polygon file may use them).
@@ -280,6 +280,9 @@ class ActorDriver:
         elif m.action in (ManeuverAction.NUDGE_LEFT, ManeuverAction.NUDGE_RIGHT):
             side = 1.0 if m.action is ManeuverAction.NUDGE_LEFT else -1.0
             p.nudge = (t, max(m.value, 2 * self.dt), side * m.depth)
+        elif m.action is ManeuverAction.FOLLOW:
+            sim.vehicle.setTau(vid, m.value)
+            sim.vehicle.setMinGap(vid, FOLLOW_GAP)
         else:
             lane = sim.vehicle.getLaneID(vid)
             if not lane or lane.startswith(":"):
