@@ -120,7 +120,6 @@ from drivefuzz.triage.evidence import (
     path_entry,
     ran_red,
     red_approach,
-    sensor_range,
     sideways_into,
     signal_state,
     stopping_distance,
@@ -139,6 +138,7 @@ from drivefuzz.triage.counterfactual import (  # noqa: F401
     counterfactual,
     test_excuse,
 )
+from drivefuzz.triage.conditions import dazzled, short_sight, slippery, windy
 from drivefuzz.triage.standstill import StandstillRules
 from drivefuzz.triage.verdict import AVOIDED, KEPT, RULES, Attribution, Fault, bug_class, needs_replay  # noqa: F401
 
@@ -167,11 +167,6 @@ def _travelled(x: np.ndarray, y: np.ndarray) -> float:
 
 #: Oracles whose verdicts the counterfactual does not settle (see :func:`attribute`).
 NO_COUNTERFACTUAL = frozenset({"lane_invasion", "immobility", "mission"})
-#: [m] a sensor range below which fog and rain count as the cause of a slow journey.
-SHORT_SIGHT = 50.0
-#: [m/s] a crosswind from which a lane may be lost however carefully one drives (Beaufort 5, a fresh breeze;
-#: below it the car's drift is centimetres): then the careful driver's replay may settle a lane invasion.
-WINDY = 8.0
 
 # ---------------------------------------------------------------------- entry point
 def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = None) -> Attribution:
@@ -193,7 +188,7 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
     # lane keeping lost to ice or wind may have been unavoidable, which the replay can show
     oracle = misbehavior.oracle
     # what may make a lane impossible to keep: ice, or a strong crosswind
-    unkeepable = (_slippery(trace, f) or _windy(scenario)) if oracle == "lane_invasion" else None
+    unkeepable = (slippery(trace, f) or windy(scenario)) if oracle == "lane_invasion" else None
     settles = oracle not in NO_COUNTERFACTUAL or ev.replay_may_settle or unkeepable is not None
     if replay is not None and needs_replay(verdict):
         return test_excuse(scenario, trace, misbehavior, replay, verdict)
@@ -203,61 +198,19 @@ def attribute(scenario, trace, misbehavior, rmap, *, replay: Replay | None = Non
             if oracle == "lane_invasion":
                 cause = unkeepable
             elif oracle == "mission":  # slow all the way: fog, or ice anywhere
-                cause = _short_sight(scenario) or _slippery(trace, f, window_s=float(trace["t"][f]) + 1.0)
+                cause = short_sight(scenario) or slippery(trace, f, window_s=float(trace["t"][f]) + 1.0)
             else:
-                cause = _slippery(trace, f)
+                cause = slippery(trace, f)
             if cause is not None:
                 out = Attribution(out.fault, f"{out.reason}: {cause}", {**out.evidence, "cause": cause}, out.rule)
         elif out.fault is Fault.EGO and oracle not in ("mission", "red_light"):  # the careful driver mastered
             # the same ice: say so (a red-light verdict names the ice already)
-            ground = _slippery(trace, f)
+            ground = slippery(trace, f)
             if ground is not None:
                 out = Attribution(out.fault, f"{out.reason} ({ground})", {**out.evidence, "ground": ground}, out.rule)
         return out
     return verdict
 
-
-
-def _slippery(trace, f: int, window_s: float = 6.0) -> str | None:
-    """Friction under an axle below 0.5 in the ``window_s`` seconds before ``f`` (a car that slid on ice may
-    leave its lane, or reach what it braked for, seconds later), described; None on grippy ground."""
-    k0 = max(f - int(window_s / trace.step_length), 0)
-    mu = np.fmin(trace["mu_front"][k0:f + 1], trace["mu_rear"][k0:f + 1])
-    slippery = np.flatnonzero(mu < 0.5)  # NaN compares False
-    if not len(slippery):
-        return None
-    k = k0 + int(slippery[0])
-    return f"friction {float(np.nanmin(mu)):.2f} under the ego from {float(trace['t'][k]):.1f} s"
-
-
-def _short_sight(scenario) -> str | None:
-    """Fog and rain that shorten the sensors' range below :data:`SHORT_SIGHT` m (a careful driver then
-    drives no faster than it can stop within what it sees), described; None in clear weather."""
-    w = scenario.weather
-    rng = sensor_range(w)
-    if rng >= SHORT_SIGHT:
-        return None
-    causes = [f"{name} {value:.0f}" for name, value in (("fog", w.fog), ("rain", w.rain)) if value > 0]
-    return f"{' and '.join(causes)} limit{'s' if len(causes) == 1 else ''} the sensors to {rng:.0f} m"
-
-
-def _dazzled(scenario, trace, k0: int, f: int) -> str | None:
-    """A low sun ahead of the ego (the observation's ``sun_glare``) between frames ``k0`` and ``f``, described
-    from where it began; None when the sun was never in its eyes."""
-    from drivefuzz.sim.world import sun_glare
-
-    w = scenario.weather
-    heading, dist = trace["heading"], trace["tls_dist"]
-    for k in range(k0, f):
-        if sun_glare(w, float(heading[k])):
-            return f"a low sun ahead (altitude {w.sun_altitude_deg:.1f} deg) dazzled it from {float(dist[k]):.1f} m out"
-    return None
-
-
-def _windy(scenario) -> str | None:
-    """A crosswind of at least :data:`WINDY` m/s, described; None in a breeze or calm."""
-    wind = scenario.weather.wind_speed
-    return f"a crosswind of {wind:.1f} m/s" if wind >= WINDY else None
 
 
 class _Event(StandstillRules):
@@ -305,12 +258,12 @@ class _Event(StandstillRules):
         if app is None:
             return self.ego("own_driving", head, decided=True)
         notes = [app.describe()]
-        glare = _dazzled(self.scenario, self.trace, app.onset, self.f)
-        sight = _short_sight(self.scenario)
+        glare = dazzled(self.scenario, self.trace, app.onset, self.f)
+        sight = short_sight(self.scenario)
         # on ice met on the way in, a stop at the line may have been beyond any driver who cannot see the ice:
         # the careful driver's replay decides
         t = self.trace["t"]
-        ice = _slippery(self.trace, self.f, window_s=max(6.0, float(t[self.f] - t[app.onset])))
+        ice = slippery(self.trace, self.f, window_s=max(6.0, float(t[self.f] - t[app.onset])))
         notes += [n for n in (glare, sight, ice) if n]
         return self.ego("own_driving", f"{head}: {'; '.join(notes)}", decided=ice is None,
                         light_onset_frame=app.onset, light_at_onset=app.state,
