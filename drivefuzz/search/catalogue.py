@@ -230,10 +230,10 @@ def crossing_traffic(mut, sc, rng, keep=None):
     # where some can, a car whose light lets it through when the ego comes (at a signalised crossing the cross
     # stream's green is the ego's red: a car timed to the ego by the clock alone stops at its light, and meets the
     # ego only as a car waiting there); where none can, such a car is all there is
-    free = [o for o in options
-            if not _light_stops(mut, sc, o[2], o[3], mut._ego_eta(sc, o[1]) - o[4] / (0.8 * lane_limit(mut, o[2])))]
     if not options:
         return None
+    free = [o for o in options
+            if not _light_stops(mut, sc, o[2], o[3], mut._ego_eta(sc, o[1]) - o[4] / (0.8 * lane_limit(mut, o[2])))]
     i, s_c, lane_id, dest, d_c, node, _, _ = rng.choice(free or options)
     t_meet = mut._ego_eta(sc, s_c) + rng.uniform(-1.0, 1.5)
     speed = round(lane_limit(mut, lane_id) * rng.uniform(0.6, 1.0), 2)
@@ -256,8 +256,8 @@ STOP_STATES = "rRu"
 
 
 def _light_stops(mut, sc, lane_id: str, dest: str, t_line: float) -> bool:
-    """Whether a car on ``lane_id`` bound for ``dest`` finds its light red or yellow at its stop line at ``t_line``
-    [s] (the program as ``sc`` shifts it): it stops there. False where the link has no fixed-time light."""
+    """Whether a car on ``lane_id`` bound for ``dest`` finds its light red (:data:`STOP_STATES`) at its stop line at
+    ``t_line`` [s] (the program as ``sc`` shifts it): it stops there. False where the link has no fixed-time light."""
     conn = next((c for c in mut.rmap.lane(lane_id).getOutgoing() if c.getToLane().getEdge().getID() == dest), None)
     if conn is None or not conn.getTLSID() or conn.getTLLinkIndex() < 0:
         return False

@@ -542,7 +542,8 @@ class Mutator(RoutePlacement):
             return m.model_copy(update={"value": round(min(max(m.value * rng.uniform(0.6, 1.4), 0.0),
                                                                1.2 * limit), 2)})
         if m.action is ManeuverAction.FOLLOW:
-            return m.model_copy(update={"value": round(min(max(m.value * rng.uniform(0.6, 1.4), MIN_FOLLOW_S), 2.0), 2)})
+            gap = min(max(m.value * rng.uniform(0.6, 1.4), MIN_FOLLOW_S), 2.0)  # [s] time gap
+            return m.model_copy(update={"value": round(gap, 2)})
         if m.depth > 0.0 and rng.random() < 0.5:
             return m.model_copy(update={"depth": round(min(max(m.depth * rng.uniform(0.6, 1.4), 0.3), MAX_NUDGE), 2)})
         return m.model_copy(update={"value": round(min(max(m.value * rng.uniform(0.6, 1.4), 1.0), 5.0), 2)})
