@@ -7,8 +7,8 @@ same number of executions, and differ only in what the feedback does:
   and the mutator aimed at those cells: drivefuzz.search.aim);
 - ``random``: a random mutant, the schedule ignoring the feedback and nothing aimed (``--feedback random``).
 
-Each runs ``--reps`` times with campaign seeds 0..reps-1 (rep r uses seed r in both). Coverage is summed
-from the campaign's journals (:func:`drivefuzz.triage.coverage.campaign_coverage`) over the cells its
+Each runs ``--reps`` times with campaign seeds 0..reps-1 (``--first-rep`` K: K..K+reps-1; rep r uses seed r in
+both). Coverage is summed from the campaign's journals (:func:`drivefuzz.triage.coverage.campaign_coverage`) over the cells its
 network and seeds offer (:func:`drivefuzz.triage.coverage.reachable`). Reproduction reruns and shrinking are
 off: they do not change coverage, only the wall time.
 
@@ -146,6 +146,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--execs", type=int, default=1000, help="executions per campaign [1000]")
     ap.add_argument("--reps", type=int, default=5, help="repetitions per configuration and network [5]")
+    ap.add_argument("--first-rep", type=int, default=0,
+                    help="campaign seed of the first repetition (more repetitions later without rerunning these) [0]")
     ap.add_argument("--networks", default=",".join(NETWORKS), help="committed seed sets [all five]")
     ap.add_argument("--strategy", default="all", help="mutation strategy [all]")
     ap.add_argument("--population", type=int, default=8, help="mutants per cycle [8]")
@@ -160,18 +162,18 @@ def main(argv: list[str] | None = None) -> int:
                     "to this JSON file")
     ap.add_argument("--no-clean", action="store_true", help="with --faults: skip the clean coverage campaigns")
     args = ap.parse_args(argv)
-    if args.reps < 1 or args.execs < 1:
-        ap.error("--reps and --execs must be at least 1")
+    if args.reps < 1 or args.execs < 1 or args.first_rep < 0:
+        ap.error("--reps and --execs must be at least 1, --first-rep at least 0")
+    reps = range(args.first_rep, args.first_rep + args.reps)
     networks = [n.strip() for n in args.networks.split(",") if n.strip()]
     configs = [c.strip() for c in args.configs.split(",") if c.strip()]
     opts = {"execs": args.execs, "population": args.population, "strategy": args.strategy}
     faults = [f.strip() for f in args.fault_list.split(",") if f.strip()] if args.fault_list else HIDDEN_FAULTS
-    work = [] if args.no_clean else [(net, fb, rep, opts) for net in networks for rep in range(args.reps)
-                                     for fb in configs]
+    work = [] if args.no_clean else [(net, fb, rep, opts) for net in networks for rep in reps for fb in configs]
     if args.faults:
         work += [(FAULT_NETWORK.get(f, "town"), fb, rep, dict(opts, execs=args.fault_execs, fault=f,
                                                               stop_at_first=args.stop_at_first))
-                 for f in faults for rep in range(args.reps) for fb in configs]
+                 for f in faults for rep in reps for fb in configs]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max(args.jobs, 1)) as pool:
         results = list(pool.map(run_one, *zip(*work)))
@@ -192,7 +194,8 @@ def _coverage_table(args, networks, configs, clean) -> None:
     """Per network and configuration the share reached in each repetition, its mean and p against random."""
     print(f"clean reference ADS, strategy {args.strategy}, {args.execs} executions per campaign "
           f"(population {args.population}), {args.reps} repetitions; share of reachable cells reached")
-    print(f"{'network':<14}{'cells':>6}  {'config':<8}" + "".join(f"{'rep' + str(r):>7}" for r in range(args.reps))
+    print(f"{'network':<14}{'cells':>6}  {'config':<8}"
+          + "".join(f"{'rep' + str(r):>7}" for r in range(args.first_rep, args.first_rep + args.reps))
           + f"{'mean':>8}{'p':>9}")
     pooled: dict[str, list[float]] = {c: [] for c in configs}
     for net in networks:
