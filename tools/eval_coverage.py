@@ -8,9 +8,9 @@ same number of executions, and differ only in what the feedback does:
 - ``random``: a random mutant, the schedule ignoring the feedback and nothing aimed (``--feedback random``).
 
 Each runs ``--reps`` times with campaign seeds 0..reps-1 (``--first-rep`` K: K..K+reps-1; rep r uses seed r in
-both). Coverage is summed from the campaign's journals (:func:`drivefuzz.triage.coverage.campaign_coverage`) over the cells its
-network and seeds offer (:func:`drivefuzz.triage.coverage.reachable`). Reproduction reruns and shrinking are
-off: they do not change coverage, only the wall time.
+both). Coverage is summed from the campaign's journals (:func:`drivefuzz.triage.coverage.campaign_coverage`)
+over the cells its network and seeds offer (:func:`drivefuzz.triage.coverage.reachable`). Reproduction reruns
+and shrinking are off: they do not change coverage, only the wall time.
 
 Printed: per network the reachable cells, per configuration the share reached in each repetition, its mean,
 and Mann-Whitney U's two-sided p of ``risk`` against ``random``; with ``--faults``, the executions to the
