@@ -14,10 +14,9 @@ routine driving (docs/feedback.md has the figures and the reasons):
 * **pet** [s]: post-encroachment time. Both bodies' paths are cut into occupation nodes
   (one per ``pet_node_m`` travelled, with the time span the body spent there); where an actor's
   rectangle came within ``pet_reach_m`` of the ego's rectangle at another time, crossing at
-  ``pet_min_angle_deg`` or more, the PET is the time between one leaving and the other arriving. A node
-  on the ego's own path (the ego's nearest node heads the actor's way) is following, not crossing: its
-  "PET" would be the time gap (TTC and the gap measure following).
-  Same-direction traffic (following, being followed) is TTC's and the gap's business.
+  ``pet_min_angle_deg`` or more, the PET is the time between one leaving and the other arriving.
+  Same-direction traffic (following, being followed) is TTC's and the gap's business: an actor node on the
+  ego's own path (the ego's nearest node heads the actor's way) is following, even in a bend.
 * **gap** [m]: minimum rectangle-to-rectangle distance to any actor (0 on contact).
 * **grip** [-]: tyre-friction use ``sqrt(ax^2 + ay^2) / (mu g)`` with ``mu`` the lower of the two
   axles' (NaN: ``mu_default``), its peak sustained over ``grip_window_s``.
