@@ -281,7 +281,7 @@ class ActorDriver:
             side = 1.0 if m.action is ManeuverAction.NUDGE_LEFT else -1.0
             p.nudge = (t, max(m.value, 2 * self.dt), side * m.depth)
         elif m.action is ManeuverAction.FOLLOW:
-            sim.vehicle.setTau(vid, m.value)
+            sim.vehicle.setTau(vid, max(m.value, self.dt))  # a user's file may ask for 0: SUMO wants a step at least
             sim.vehicle.setMinGap(vid, FOLLOW_GAP)
         else:
             lane = sim.vehicle.getLaneID(vid)
