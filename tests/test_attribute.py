@@ -22,7 +22,8 @@ from drivefuzz.oracle import Misbehavior
 from drivefuzz.scenario import Actor, AdsSpec, Maneuver, Mission, Scenario, SimOptions
 from drivefuzz.scenario.roadmap import load_roadmap
 from drivefuzz.sim.execute import execute
-from drivefuzz.triage.attribute import Attribution, Fault, attribute, counterfactual, signal_state
+from drivefuzz.scenario.signals import signal_state
+from drivefuzz.triage.attribute import Attribution, Fault, attribute, counterfactual
 from drivefuzz.triage.evidence import actor_track, other_link
 from drivefuzz.triage.signature import signature
 from ego.ads import ReferenceADS

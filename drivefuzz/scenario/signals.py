@@ -80,6 +80,16 @@ def signal_state(net_path: str, tls: str, link: int, t: float, shift: float = 0.
     return None
 
 
+def connection_state(net_path: str, conn, t: float, signals=()) -> str | None:
+    """The state a sumolib connection's light shows at ``t`` [s], its program shifted as a scenario's ``signals``
+    (:class:`drivefuzz.scenario.SignalShift`) shift it; None without a light or a fixed-time program."""
+    tls = conn.getTLSID()
+    if not tls or conn.getTLLinkIndex() < 0:
+        return None
+    shift = next((s.shift for s in signals if s.tls == tls), 0.0)
+    return signal_state(net_path, tls, conn.getTLLinkIndex(), t, shift)
+
+
 def phase_starts(prog: Program, link: int, state_chars: str) -> list[float]:
     """[s] program times (from the cycle start, offset not applied) at which ``link`` turns to one of
     ``state_chars`` from another state."""

@@ -19,7 +19,7 @@ from typing import Callable, NamedTuple
 
 from drivefuzz.scenario import Actor, ActorKind, Maneuver, ManeuverAction, NavType, Puddle, Scenario, SignalShift
 from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN
-from drivefuzz.scenario.signals import phase_starts, shiftable, signal_state
+from drivefuzz.scenario.signals import connection_state, phase_starts, shiftable
 from drivefuzz.search.fairness import lane_limit, unfair
 from drivefuzz.search.mutate import Mutation, Mutator
 
@@ -259,10 +259,7 @@ def _light_stops(mut, sc, lane_id: str, dest: str, t_line: float) -> bool:
     """Whether a car on ``lane_id`` bound for ``dest`` finds its light red (:data:`STOP_STATES`) at its stop line at
     ``t_line`` [s] (the program as ``sc`` shifts it): it stops there. False where the link has no fixed-time light."""
     conn = next((c for c in mut.rmap.lane(lane_id).getOutgoing() if c.getToLane().getEdge().getID() == dest), None)
-    if conn is None or not conn.getTLSID() or conn.getTLLinkIndex() < 0:
-        return False
-    shift = next((s.shift for s in sc.signals if s.tls == conn.getTLSID()), 0.0)
-    state = signal_state(str(mut.rmap.path), conn.getTLSID(), conn.getTLLinkIndex(), max(t_line, 0.0), shift)
+    state = None if conn is None else connection_state(str(mut.rmap.path), conn, max(t_line, 0.0), sc.signals)
     return state is not None and state in STOP_STATES
 
 

@@ -121,7 +121,6 @@ from drivefuzz.triage.evidence import (
     ran_red,
     red_approach,
     sideways_into,
-    signal_state,
     stopping_distance,
     to_local,
     wrap_angle,
@@ -138,6 +137,7 @@ from drivefuzz.triage.counterfactual import (  # noqa: F401
     counterfactual,
     test_excuse,
 )
+from drivefuzz.scenario.signals import connection_state
 from drivefuzz.triage.conditions import dazzled, short_sight, slippery, windy
 from drivefuzz.triage.standstill import StandstillRules
 from drivefuzz.triage.verdict import AVOIDED, KEPT, RULES, Attribution, Fault, bug_class, needs_replay  # noqa: F401
@@ -533,8 +533,7 @@ class _Event(StandstillRules):
         tls = conn.getTLSID()
         ev = {"other_from": conn.getFromLane().getID(), "other_via": conn.getViaLaneID(), "other_entered_frame": k_in}
         if tls:
-            shift = next((s.shift for s in self.scenario.signals if s.tls == tls), 0.0)
-            state = signal_state(str(self.rmap.path), tls, conn.getTLLinkIndex(), t_in, shift)
+            state = connection_state(str(self.rmap.path), conn, t_in, self.scenario.signals)
             if state is not None and state in RED:
                 return self.other("other_ran_red", f"the vehicle {oth.id} entered junction {conn.getJunction().getID()} on red "
                                   f"({state!r} at {t_in:.1f} s) and struck the ego's {side}",

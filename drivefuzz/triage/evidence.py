@@ -20,7 +20,6 @@ import numpy as np
 
 from drivefuzz.geometry import corners
 from drivefuzz.scenario.model import EGO_LENGTH, EGO_WIDTH, lane_edge
-from drivefuzz.scenario.signals import signal_state  # noqa: F401  (re-exported for the rules)
 
 #: [m/s^2] braking a following driver must expect; harder braking needs a hazard ahead.
 COMFORT_DECEL = 3.5
