@@ -17,9 +17,10 @@ and Mann-Whitney U's two-sided p of ``risk`` against ``random``; with ``--faults
 first finding of each hidden fault of the reference ADS on its network (``-``: not found), how many
 campaigns found it, and the distinct finding signatures per campaign. A finding is the fault's only when
 its scenario, run again with the clean reference ADS, does not show the same misbehaviour (the clean ADS
-has findings of its own: a car stopped for good behind an obstacle, say). ``--configs`` may add the other
-guided feedbacks (``coverage``, ``product``: the value that picks successors, drivefuzz.search.schedule);
-each is compared with ``random``. The last lines::
+has findings of its own: a car stopped for good behind an obstacle, say); every execution with a finding is
+judged, and in brackets, where it differs, the first finding of each signature only (:func:`_fault_finding`).
+``--configs`` may add the other guided feedbacks (``coverage``, ``product``: the value that picks successors,
+drivefuzz.search.schedule); each is compared with ``random``. The last lines::
 
     coverage, default / random: X.XX (p = ...)
 
@@ -74,15 +75,19 @@ def run_one(network: str, feedback: str, rep: int, opts: dict) -> dict:
     ads = AdsSpec(name="ego", options={"fault": opts["fault"]} if opts.get("fault") else {})
     cfg = FuzzConfig(population=opts["population"], strategy=opts["strategy"], seed=rep, max_execs=opts["execs"],
                      feedback=feedback, ads=ads, reproduce=0, shrink=0)
-    judged: dict[str, bool] = {}  # signature -> the fault's own (the clean ADS does not fail there)
+    judged: dict[str, bool] = {}  # execution key -> the fault's own (the clean ADS does not fail there)
 
     class FirstFinding(Campaign):
         """A campaign that ends at the fault's first finding (``--stop-at-first``: only the time to it counts)."""
 
+        judged_hits = 0  # executions with a finding when the findings were last judged
+
         def out_of_budget(self) -> bool:
-            if self.progress.findings > len(judged) and _fault_finding(self.out, judged) is not None:
+            hits = sum(f.hits for f in self.findings)
+            if hits > self.judged_hits and _fault_finding(self.out, judged)[0] is not None:
                 self.stop_reason = self.stop_reason or "the fault's first finding"
                 return True
+            self.judged_hits = hits
             return super().out_of_budget()
 
     with tempfile.TemporaryDirectory(prefix="eval-coverage-") as tmp:
@@ -92,19 +97,28 @@ def run_one(network: str, feedback: str, rep: int, opts: dict) -> dict:
         campaign.run()
         wall = time.perf_counter() - t0
         cov = campaign_coverage(Path(tmp) / "out", write=False)
-        first = _fault_finding(Path(tmp) / "out", judged, every=True) if opts.get("fault") else None
-        signatures = sum(judged.values())
+        first, first_of_signature, signatures = (_fault_finding(Path(tmp) / "out", judged, every=True)
+                                                 if opts.get("fault") else (None, None, 0))
     return {"network": network, "feedback": feedback, "rep": rep, "fault": opts.get("fault"),
             "execs": campaign.progress.execs, "reachable": cov["reachable"], "reached": cov["reached"],
-            "share": cov["share"], "first": first, "signatures": signatures, "wall": wall,
-            "cells": sorted(c for c, h in cov["cells"].items() if h["count"])}
+            "share": cov["share"], "first": first, "first_of_signature": first_of_signature, "signatures": signatures,
+            "wall": wall,
+            "cells": sorted(c for c, h in cov["cells"].items() if h["count"]),
+            "aimed": {c: h["aimed"] for c, h in cov["cells"].items() if h.get("aimed")}}
 
 
-def _fault_finding(out: Path, judged: dict[str, bool], every: bool = False) -> int | None:
-    """The execution number of the campaign's first finding that is the fault's own: its scenario run again
-    with the clean reference ADS does not show the same misbehaviour (the clean ADS has findings of its own,
-    a car stopped for good behind an obstacle, say: those say nothing about the fault). ``judged`` caches
-    the verdict per signature (one replay each); with ``every``, every signature is judged."""
+def _fault_finding(out: Path, judged: dict[str, bool], every: bool = False) -> tuple[int | None, int | None, int]:
+    """When the campaign in ``out`` found the fault: (the execution number of its first finding that is the
+    fault's own, the same counting only each signature's first finding, the fault's own signatures).
+
+    A finding is the fault's own when its scenario, run again with the clean reference ADS, does not show the
+    same misbehaviour (the clean ADS has findings of its own: a car stopped for good behind an obstacle, say).
+    A signature abstracts the situation, so one finding record can hold executions of both causes (on town
+    the clean ADS, too, fails to yield to a car from the left at B0 in some scenarios): the first number judges
+    every execution with a finding (the record lists them all, each replayable), the second only the first of
+    each signature (the one the findings list shows), which misses the fault wherever the clean ADS's own
+    failure came first. ``judged`` caches the verdict per execution key (one replay each). Without ``every``
+    the judging stops at the first own finding (the signature count is then a lower bound)."""
     import json as _json
     import sqlite3
 
@@ -117,9 +131,16 @@ def _fault_finding(out: Path, judged: dict[str, bool], every: bool = False) -> i
     rows = db.execute("SELECT exec_id, key, signature, verdict FROM executions WHERE finding IS NOT NULL AND "
                       "verdict NOT LIKE 'simulator-crash%' AND verdict NOT LIKE 'hang%' ORDER BY exec_id").fetchall()
     db.close()
-    refs, first = None, None
+    refs: dict[str, str] | None = None
+    first = first_of_signature = None
+    own: set[str] = set()  # signatures whose first finding is the fault's own
+    seen: set[str] = set()
     for exec_id, key, signature, verdict in rows:
-        if signature not in judged:
+        representative = signature not in seen
+        seen.add(signature)
+        if first is not None and not (every and representative):
+            continue
+        if key not in judged:
             if refs is None:  # the scenario of every hit is kept (a corpus folder named in the journal)
                 refs = {}
                 for path in (out / "jobs").glob("*/journal.jsonl"):
@@ -134,12 +155,15 @@ def _fault_finding(out: Path, judged: dict[str, bool], every: bool = False) -> i
                 continue
             sc = load_scenario(out / refs[key]).model_copy(update={"ads": AdsSpec(name="ego")})
             clean = execute(sc, oracles=OracleSettings().instantiate())
-            judged[signature] = not any(f"{m.oracle}/{m.kind}" == verdict for m in clean.misbehaviors)
-        if judged.get(signature) and first is None:
-            first = exec_id
-            if not every:
-                break
-    return first
+            judged[key] = not any(f"{m.oracle}/{m.kind}" == verdict for m in clean.misbehaviors)
+        if judged[key]:
+            first = exec_id if first is None else first
+            if representative:
+                own.add(signature)
+                first_of_signature = exec_id if first_of_signature is None else first_of_signature
+        if first is not None and not every:
+            break
+    return first, first_of_signature, len(own)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -220,20 +244,33 @@ def _coverage_table(args, networks, configs, clean) -> None:
 def _fault_table(args, configs, faults, results) -> None:
     """Per hidden fault and configuration the executions to the first finding, and distinct signatures."""
     print(f"\nexecutions to the first finding of each hidden fault ({args.fault_execs} executions, "
-          f"{args.reps} repetitions; '-' = not found):")
+          f"{args.reps} repetitions; '-' = not found; in brackets where it differs: counting each signature's "
+          "first finding only)")
     print(f"{'fault':<22}{'network':<10}" + "".join(f"{c:>30}" for c in configs))
     for f in faults:
         cells = []
         for fb in configs:
             rows = sorted((r for r in results if r["fault"] == f and r["feedback"] == fb), key=lambda r: r["rep"])
-            cells.append(",".join("-" if r["first"] is None else str(r["first"]) for r in rows))
+            cells.append(",".join(_first(r) for r in rows))
         print(f"{f:<22}{FAULT_NETWORK.get(f, 'town'):<10}" + "".join(f"{c:>30}" for c in cells))
-    print("found (campaigns with a finding) and distinct finding signatures per campaign (mean):")
+    print("found (campaigns with a finding; each signature's first only) and the fault's own signatures per "
+          "campaign (mean):")
     for fb in configs:
         rows = [r for r in results if r["fault"] and r["feedback"] == fb]
         if rows:
-            print(f"  {fb:<10}found {sum(r['first'] is not None for r in rows)}/{len(rows)}, "
+            print(f"  {fb:<10}found {sum(r['first'] is not None for r in rows)}/{len(rows)} "
+                  f"({sum(r['first_of_signature'] is not None for r in rows)}/{len(rows)}), "
                   f"the fault's own signatures {statistics.mean(r['signatures'] for r in rows):.2f}")
+
+
+def _first(r: dict) -> str:
+    """``first`` of a fault campaign, and the signature-first count in brackets where it differs."""
+    def show(n):
+        return "-" if n is None else str(n)
+
+    strict = r.get("first_of_signature", r["first"])
+    return show(r["first"]) + ("" if strict == r["first"] else f"({show(strict)})")
+
 
 if __name__ == "__main__":
     sys.exit(main())
