@@ -305,3 +305,96 @@ def test_the_profile_takes_the_pace_the_ads_was_seen_driving(highway_seeds, town
     tmut.observe(town, ego_travel(run.trace), TRAVEL_EVERY_S)
     assert tmut._ego_eta(shifted, 150.0) == before[1]
     assert tmut._ego_eta(town, 150.0) != before[0]
+
+
+def test_the_lane_changes_a_route_makes_the_ego_do_are_where_and_when_it_does_them(mut, town_seeds, highway_seeds):
+    """Each lane change of the clean reference ADS on the committed town and highway seeds is one of
+    :func:`lane_change_moves`, same lanes, within 1 s of the time the profile of its seed run (a fuzz job's)
+    gives it; the ego is on the lane it entered by before the place and on the one it needs after it. The
+    highway's seed 011 changes two lanes on the off-ramp's edge, which the former spots (no lane the junction leads
+    into leads on) did not see."""
+    from drivefuzz.campaign.job import TRAVEL_EVERY_S, ego_travel
+    from drivefuzz.search.aim_place import lane_change_moves
+
+    hw = Mutator(load_roadmap(highway_seeds[0].network_path()))
+    seen = 0
+    for m, seeds in ((Mutator(mut.rmap), town_seeds), (hw, highway_seeds)):
+        for sc in seeds:
+            trace = execute(sc).trace
+            m.observe(sc, ego_travel(trace), TRAVEL_EVERY_S)
+            lanes = [str(x) for x in trace["lane"]]
+            moves = lane_change_moves(m, sc)
+            changes = [(k, a, b) for k, (a, b) in enumerate(zip(lanes, lanes[1:]), 1)
+                       if a != b and not a.startswith(":") and not b.startswith(":")
+                       and a.rsplit("_", 1)[0] == b.rsplit("_", 1)[0]]
+            for k, a, b in changes:
+                seen += 1
+                move = next((mv for mv in moves if mv[2].rsplit("_", 1)[0] == a.rsplit("_", 1)[0]), None)
+                assert move is not None, (sc.mission, a, b, moves)
+                on = [ln for ln in lanes if ln.rsplit("_", 1)[0] == a.rsplit("_", 1)[0]]
+                assert (move[2], move[3]) == (on[0], on[-1]), (a, move)
+                assert abs(k * trace.step_length - m._ego_eta(sc, move[0])) < 1.0, (a, b, move)
+                side = "left" if int(b.rsplit("_", 1)[1]) > int(a.rsplit("_", 1)[1]) else "right"
+                assert move[1] == side
+            assert len({mv[2] for mv in moves}) == len({a.rsplit("_", 1)[0] for _, a, _ in changes})
+    assert seen >= 6
+    sc = highway_seeds[11]
+    ((_, side, frm, to),) = lane_change_moves(hw, sc)
+    assert (side, frm, to) == ("right", "hw1-AddedOffRampEdge_2", "hw1-AddedOffRampEdge_0")
+    i = hw._route(sc).index("hw1-AddedOffRampEdge")
+    at = hw.lane_change_at(sc, i)
+    assert hw.ego_lane_at(sc, i, at - 1.0) == frm and hw.ego_lane_at(sc, i, at + 1.0) == to == hw.ego_lane(sc, i)
+
+
+def test_a_car_on_the_lane_the_ego_changes_into_meets_it_in_its_lane_change(mut, town_seeds):
+    """Town's seeds 000, 002 and 006 change lanes to the left: a car level with the ego's rear on that lane as it
+    changes is in its left rear quarter (the reference ADS does not look before it changes lanes: it strikes the
+    car, its fault), and a slower car drawn level on it is on its left. The fairness rules take the ego to be on
+    the lane it entered by until it changes (before, the rear car was a follower on the ego's lane too close to
+    stop, and the level car entered the simulation inside the ego's body)."""
+    from drivefuzz.search.aim_place import into_lane, lane_change_moves
+    from drivefuzz.triage.attribute import attribute
+
+    hits = {"rear": 0, "level": 0}
+    for si in (0, 2, 6):
+        sc = town_seeds[si]
+        (move,) = lane_change_moves(mut, sc)
+        assert move[1] == "left"
+        for where, want in (("rear", "vehicle/rear_left|lane_change"), ("level", "vehicle/left|lane_change")):
+            built = into_lane(mut, sc, random.Random(si), move, where)
+            assert built is not None
+            new = sc.model_copy(update={"actors": sc.actors + tuple(built[0])})
+            assert unfair(mut, new, built[0][0]) is None, where
+            ex = execute(new)
+            r = risk_score(ex.trace)
+            cells = {f"{e.party}|{e.manoeuvre}" for e in (classify(new, ex.trace, mut.rmap, a, f)
+                                                           for a, f in close_encounters(r) if a == built[0][0].id)}
+            hits[where] += want in cells
+            for m in ex.misbehaviors:
+                if m.oracle == "collision":
+                    assert attribute(new, ex.trace, m, mut.rmap).fault == "ego", (si, where, m)
+    assert hits["rear"] >= 2 and hits["level"] >= 2, hits
+
+
+def test_a_walker_crosses_just_past_the_ego_s_lane_change(mut, town_seeds):
+    """A walker from the left aimed at a lane change crosses 5-20 m past the place the route makes the ego change
+    lanes: the ego meets it within the 3 s after it changed (before, a crossing walker was kept when it started
+    within 50 m before the place: met while the ego cruised or braked, never while it changed lanes)."""
+    from drivefuzz.search.aim import _walker_after
+    from drivefuzz.search.aim_place import lane_change_moves
+
+    met = built = 0
+    for si in (0, 2, 6):
+        sc = town_seeds[si]
+        (move,) = lane_change_moves(mut, sc)
+        for k in range(3):
+            b = _walker_after(walker_from_left, move[0], mut, sc, random.Random(k))
+            if b is None:
+                continue
+            built += 1
+            new = sc.model_copy(update={"actors": sc.actors + tuple(b[0])})
+            ex = execute(new)
+            r = risk_score(ex.trace)
+            met += any(f"{e.party}|{e.manoeuvre}" == "pedestrian/crossing_left|lane_change"
+                       for e in (classify(new, ex.trace, mut.rmap, a, f) for a, f in close_encounters(r)))
+    assert built >= 6 and met >= 3, (built, met)

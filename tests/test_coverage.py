@@ -119,6 +119,11 @@ def test_a_run_without_actors_has_no_cells_unless_the_tyres_near_their_limit(tow
     r = RiskScore(score=0.0, encounters=(("a", "ttc", 2.9, 5), ("a", "gap", 0.3, 9), ("b", "ttc", 3.1, 4),
                                          ("c", "pet", 1.9, 7)))
     assert close_encounters(r) == [("a", 9), ("c", 7)]
+    # near (within 1.5 times a threshold, none under it): b's 3.1 s; a and c are close, d is too far off
+    r = RiskScore(score=0.0, encounters=r.encounters + (("d", "pet", 3.5, 2), ("e", "gap", 2.0, 3)))
+    assert close_encounters(r, near=True) == [("b", 4), ("e", 3)]
+    assert close_encounters(RiskScore(score=0.0, grip=0.7, grip_frame=12), near=True) == [(None, 12)]
+    assert close_encounters(RiskScore(score=0.0, grip=0.9, grip_frame=12), near=True) == []
 
 
 # ------------------------------------------------------------------ what each network offers
@@ -160,16 +165,18 @@ def test_summarise_counts_reached_cells_findings_incidents_and_aims():
              "speed-condition:0-10 km/h|clear"]
     records = [{"cells": reach[:1] + ["party-element:none/grip|edge"], "finding": "findings/x"},
                {"cells": reach[:1], "incident": "incidents/y", "mutation": f"aim {reach[0]}: a stopped car"},
+               {"cells": [], "mutation": f"aim {reach[1]}: a follower", "near": [reach[1]]},
                {"cells": [], "mutation": f"aim {reach[1]}: a follower"},
-               {"cells": [], "mutation": f"aim {reach[1]}: a follower"}, {"cells": [], "mutation": "add actor"}]
+               {"cells": [], "mutation": "add actor", "near": [reach[2]]}]
     cov = summarise(records, reach)
     assert (cov["reachable"], cov["reached"], cov["share"]) == (3, 1, round(1 / 3, 4))
-    assert cov["cells"][reach[0]] == {"count": 2, "findings": 1, "incidents": 1, "aimed": 1}
-    assert cov["cells"][reach[1]] == {"count": 0, "findings": 0, "incidents": 0, "aimed": 2}
+    assert cov["cells"][reach[0]] == {"count": 2, "findings": 1, "incidents": 1, "aimed": 1, "near": 0}
+    assert cov["cells"][reach[1]] == {"count": 0, "findings": 0, "incidents": 0, "aimed": 2, "near": 1}
     assert cov["cells"][reach[2]]["aimed"] == 0
     text = format_coverage(cov)
-    assert "never reached, aimed at and missed (1; aimed executions): vehicle/behind|cruise (2)" in text
-    assert "never reached, never aimed at (1): 0-10 km/h|clear" in text
+    assert "never reached, aimed at and missed (1; aimed executions, and those that came near): " \
+        "vehicle/behind|cruise (2; near 1)" in text
+    assert "never reached, never aimed at (1): 0-10 km/h|clear (near 1)" in text
     assert cov["projections"]["party-manoeuvre"] == {"reachable": 2, "reached": 1}
     assert cov["outside"] == {"party-element:none/grip|edge": {"count": 1, "findings": 1, "incidents": 0}}
 
@@ -186,9 +193,12 @@ def test_the_schedule_adds_a_bonus_for_cells_the_job_has_not_reached_only_under_
     assert not s.is_new(None, 0.0, ["a"])
     back = Schedule.from_json(cfg, json.loads(json.dumps(s.to_json())), "risk")
     assert back.cells == {"a": 1}
+    # a member that came near a cell the job has not reached: a smaller bonus, and it enters the corpus
+    assert s.cell_bonus([], ["a", "b"]) == pytest.approx(cfg.near_bonus)
+    assert s.is_new(None, 0.0, [], ["b"]) and not s.is_new(None, 0.0, [], ["a"])
     for mode in ("random", "paper"):
         other = Schedule(cfg, mode)
-        assert other.cell_bonus(["a"]) == 0.0 and not other.is_new(None, 1.0, ["a"])
+        assert other.cell_bonus(["a"], ["b"]) == 0.0 and not other.is_new(None, 1.0, ["a"], ["b"])
 
 
 # ------------------------------------------------------------------ the command, a resume
@@ -232,6 +242,9 @@ def test_coverage_command_and_a_resume_sums_to_one_straight_run(tmp_path):
     assert cov["executions"] == 12
     counts = _journal_cells(a)
     assert counts, "twelve town executions with actors met nobody"
+    ends = [json.loads(line) for p in (a / "jobs").glob("*/journal.jsonl") for line in p.read_text().splitlines()]
+    ends = [r for r in ends if r.get("event") == "end" and r.get("risk") is not None]
+    assert ends and all(not set(r["near"]) & set(r["cells"]) for r in ends)  # near: none of its own cells
     assert {c: h["count"] for c, h in cov["cells"].items() if h["count"]} == \
         {c: n for c, n in counts.items() if c in cov["cells"]}
     assert cov["reached"] == sum(1 for c in cov["cells"] if c in counts)

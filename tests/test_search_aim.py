@@ -178,9 +178,9 @@ def test_a_job_stops_aiming_at_lane_changes_once_its_ego_keeps_waiting_behind_st
     count_misses(misses, [waited, waited])
     assert aim_cells([lc1, lc2, other], set(), misses) == [other]
     # seed 001's route forces no lane change: an aimed one is built around a stopped car, and says so
-    from drivefuzz.search.aim_place import lane_change_spots
+    from drivefuzz.search.aim_place import lane_change_moves
 
-    assert not lane_change_spots(mut, town_seeds[1])
+    assert not lane_change_moves(mut, town_seeds[1])
     m, _ = aimed(mut, town_seeds[1], lc1, random.Random(0))
     assert m.description.startswith(f"aim {lc1}: {BLOCKED_LANE}: "), m.description
 

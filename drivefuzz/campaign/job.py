@@ -366,10 +366,10 @@ class SeedJob:
                       if not rec["finding"] and not rec.get("incident") and rec["risk"] is not None]
         values = [member_value(self.cfg.feedback, _feedback_value(rec, self.cfg.feedback),
                                schedule.weight(rec.get("situation")), schedule.new_cells(rec.get("cells")),
-                               schedule.cell_bonus(rec.get("cells"))) for rec, _ in candidates]
+                               schedule.cell_bonus(rec.get("cells"), rec.get("near"))) for rec, _ in candidates]
         pick = pick_successor(values, self.cfg.feedback, rng)
         for (rec, sc), value in zip(candidates, values):
-            if schedule.is_new(rec.get("situation"), rec["risk"], rec.get("cells")):
+            if schedule.is_new(rec.get("situation"), rec["risk"], rec.get("cells"), rec.get("near")):
                 schedule.add_new(self._corpus_ref(sc), value, rec.get("hint"))
         schedule.observe([rec.get("situation") for rec, _ in members],
                          [rec.get("situation") for rec, _ in members if rec["finding"]],
@@ -406,6 +406,9 @@ class SeedJob:
             if self.cfg.feedback in GUIDED and r.frame is not None and r.riskiest_actor is not None:
                 rec["situation"] = situation(scenario, ex.trace, store.rmap, r.frame, r.riskiest_actor)
             rec["cells"] = execution_cells(scenario, ex.trace, store.rmap, r)  # interaction coverage
+            if self.cfg.feedback in GUIDED:  # and the cells it came near, which the schedule goes on from
+                rec["near"] = [c for c in execution_cells(scenario, ex.trace, store.rmap, r, near=True)
+                               if c not in rec["cells"]]
             if key.endswith("/seed"):  # how fast the ADS under test drives the mission (Mutator.observe)
                 rec["ego_travel"] = ego_travel(ex.trace)
             t_store = time.perf_counter()

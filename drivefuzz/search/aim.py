@@ -49,14 +49,19 @@ from drivefuzz.search import catalogue as cat
 from drivefuzz.search import programs as prog
 from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
-from drivefuzz.search.aim_place import (JUNCTION_COLUMNS, drawn_level, follower_at, lane_change_spots, meeting,
-                                        passes, profile_spots, walker_from_left)
+from drivefuzz.search.aim_place import (JUNCTION_COLUMNS, drawn_level, follower_at, into_lane, lane_change_moves,
+                                        meeting, passes, profile_spots, walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 
 #: [m] an actor this far before a junction (along the ego's route) meets the ego at it
 NEAR_JUNCTION_M = 50.0
 #: builders that time their actor to the aimed place themselves (no filter on where it starts)
-TIMED = ("passes", "drawn_level", "follower", "crossing", "oncoming", "grip")
+TIMED = ("passes", "drawn_level", "follower", "crossing", "oncoming", "grip", "into_lane", "walker_after")
+#: vehicle rows of a lane change that a car on the lane the ego changes into makes (:func:`into_lane`): where it is
+#: as the ego changes, and the side of the change it needs (None: either)
+INTO_LANE = {"vehicle/behind": ("behind", None), "vehicle/rear_left": ("rear", "left"),
+             "vehicle/rear_right": ("rear", "right"), "vehicle/left": ("level", "left"),
+             "vehicle/right": ("level", "right")}
 #: share of the aimed components built on the mission alone (the parent's actors, puddles and light shifts
 #: dropped): on a lineage's parent, with up to 12 actors that slow, stop and meet the ego first, the place and
 #: timing (the mutator's profile of the ego on an empty road) are off. One 1,000-execution town campaign each:
@@ -109,8 +114,14 @@ def _aimed_party(mut: Mutator, sc: Scenario, cell: str, row: str, col: str, rng:
     """``sc`` with a component built for the party x column ``cell``; ``sc`` itself (said why) when it cannot."""
     base, at, setup = meeting(mut, sc, col, rng)
     if col == "lane_change":
-        forced = lane_change_spots(mut, sc)
-        base, at, setup = (sc, rng.choice(forced), "") if forced else _blocked_lane(mut, sc, rng)
+        moves = lane_change_moves(mut, sc)
+        where, side = INTO_LANE.get(row, (None, None))
+        fit = [m for m in moves if side in (None, m[1])]
+        if where and fit:  # a car on the lane the ego changes into, where the cell wants it
+            situation = Situation("into_lane", "", partial(into_lane, move=rng.choice(fit), where=where))
+            m = add_situation(mut, sc, situation, rng)
+            return Mutation(sc if m.scenario is sc else m.scenario, f"aim {cell}: {m.description}", m.retries)
+        base, at, setup = (sc, rng.choice(moves)[0], "") if moves else _blocked_lane(mut, sc, rng)
     if col in JUNCTION_COLUMNS + ("lane_change",) and at is None:
         return Mutation(sc, f"aim {cell}: the route has no place for it")
     if col == "lane_change" and row == "vehicle/ahead" and setup:  # the car it changes lanes around is that party
@@ -142,7 +153,7 @@ def _near_place(mut: Mutator, sc: Scenario, at: float, actor) -> bool:
 def _blocked_lane(mut: Mutator, sc: Scenario, rng: random.Random) -> tuple[Scenario, float | None, str]:
     """A stopped vehicle on the ego's lane of a route edge with another lane that leads on: an ego that passes it
     changes lanes there (the fairness rules keep the way on; the reference ADS waits behind it instead: it changes
-    lanes only where its route needs it, :func:`lane_change_spots`). The place is 5-25 m before it."""
+    lanes only where its route needs it, :func:`lane_change_moves`). The place is 5-25 m before it."""
     def multilane(actor) -> bool:
         return len(prog._beside(mut, actor.start_lane)) > 0
 
@@ -241,6 +252,10 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
             return [Situation("walker_along", "", _walker_along)]
         # it reaches the road 1 s after to 1.5 s before the ego is expected there (the catalogue's 0-4 s early
         # gives a post-encroachment time over 2 s, no close encounter, in a third of the draws)
+        if col == "lane_change" and at is not None:  # just past the place where the route makes it change lanes
+            crosses = Situation("walker_after", "", partial(_walker_after, walker_from_left if side == "left"
+                                                            else cat.walker_crosses, at))
+            return [crosses if side == "left" else _filtered(crosses, partial(_on_side, mut, sc, side))]
         if side == "left":  # the catalogue's walker starts on the ego's own edge: its right, where traffic keeps right
             return [Situation("walker_crosses", "", walker_from_left),
                     _filtered(Situation("walker_crosses", "", partial(cat.walker_crosses, early=(-1.0, 1.5))),
@@ -268,6 +283,12 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
         return [Situation("oncoming", "", oncoming if at is None else partial(oncoming, at=at)),
                 Situation("crossing", "", partial(_crossing, want="oncoming", col=col, at=at))]
     return [Situation("crossing", "", partial(_crossing, want=approach, col=col, at=at))]  # crossing_left / _right
+
+
+def _walker_after(builder: Callable, at: float, mut: Mutator, sc: Scenario, rng: random.Random):
+    """``builder`` (a crossing walker) crossing 5-20 m past the route distance ``at``, reaching the road from 1 s
+    after to 1.5 s before the ego: the ego meets it 1-2 s after it has changed lanes there."""
+    return builder(mut, sc, rng, early=(-1.0, 1.5), at=at + rng.uniform(5.0, 20.0))
 
 
 def _on_side(mut: Mutator, sc: Scenario, side: str | None, actor) -> bool:

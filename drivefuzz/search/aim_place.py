@@ -80,19 +80,57 @@ def meeting(mut: Mutator, sc: Scenario, col: str, rng: random.Random) -> tuple[S
     return sc, (float(rng.choice(spots)) if spots else None), ""
 
 
-def lane_change_spots(mut: Mutator, sc: Scenario) -> list[float]:
-    """Route distances [m] where the route makes the ego change lanes: the middle of each route edge on which no
-    lane the ego can enter by (its start lane, or one the previous junction leads into) leads on along the route."""
+def lane_change_moves(mut: Mutator, sc: Scenario) -> list[tuple[float, str, str, str]]:
+    """(route distance [m], side ``left`` / ``right``, from lane, to lane) of each lane change the route makes the
+    ego do: on each route edge where the lane it enters by (:meth:`Mutator.ego_entry_lane`) does not lead on, to
+    the nearest lane that does, at :meth:`Mutator.lane_change_at`."""
     rmap, route = mut.rmap, mut._route(sc)
     out, s = [], -sc.mission.start_pos
     for i, e in enumerate(route[:-1]):
-        length = rmap.edge(e).getLength()
-        entry = {sc.mission.start_lane} if i == 0 else {c[1] for c in rmap.connections(route[i - 1], e)}
-        leads = {c[0] for c in rmap.connections(e, route[i + 1])}
-        if entry and leads and not entry & leads:
-            out.append(max(s + 0.45 * length, 1.0))
-        s += length
+        at = mut.lane_change_at(sc, i)
+        if at is not None:
+            frm, to = mut.ego_entry_lane(sc, i), mut.ego_lane_at(sc, i, at)
+            side = "left" if rmap.lane(to).getIndex() > rmap.lane(frm).getIndex() else "right"
+            out.append((max(s + at, 1.0), side, frm, to))
+        s += rmap.edge(e).getLength()
     return out
+
+
+#: [s] the time to collision at which a car closes in from behind on the lane the ego has just changed into
+INTO_LANE_TTC = (1.2, 2.6)
+
+
+def into_lane(mut: Mutator, sc: Scenario, rng: random.Random, move: tuple[float, str, str, str], where: str):
+    """A car on the lane the ego changes into (``move``, :func:`lane_change_moves`), there as the ego changes
+    lanes: ``behind``, 3-5 m/s faster and its front :data:`INTO_LANE_TTC` times that behind the ego's rear (the
+    ego changes in front of it); ``rear``, 1-3 m/s faster and its front about level with the ego's rear (in the
+    rear quarter the ego moves towards); ``level``, abreast, 15-40 % slower than the ego (it starts ahead). A maneuver
+    vehicle without steps: SUMO drives it in its lane at its speed and brakes for the ego once the ego is ahead.
+    A careful driver looks before changing lanes and waits for the gap; what follows is the ego's doing."""
+    at, _, _, to_lane = move
+    spot = cat._route_spot(mut, sc, at)
+    if spot is None:
+        return None
+    pos = spot[2]  # the ego's front
+    v = prog._ego_speed(mut, sc, at)
+    t_at = mut._ego_eta(sc, at)
+    top = prog.SPEED_SHARE[1] * lane_limit(mut, to_lane)
+    if where == "behind":  # the gap from the speed it really gets (the lane's limit caps it)
+        speed = min(v + rng.uniform(3.0, 5.0), top)
+        front = pos - EGO_LENGTH - max(speed - v, 1.0) * rng.uniform(*INTO_LANE_TTC)
+    elif where == "rear":
+        speed, front = min(v + rng.uniform(1.0, 3.0), top), pos - EGO_LENGTH + rng.uniform(-1.0, 2.0)
+    else:  # slower: it starts ahead of the ego (SUMO would insert a car level with it beside it)
+        speed, front = v * (1.0 - rng.uniform(0.15, 0.4)), pos + (NPC_LENGTH - EGO_LENGTH) / 2.0 + rng.uniform(-1, 1)
+    speed = round(speed, 2)
+    # its run-up stays on the lane: one through the junction before it slowed in the turn and came 20-40 m late
+    lead = min(rng.uniform(3.0, 6.0), (front - 1.0) / max(speed, 0.1), t_at)
+    if speed < 1.0 or lead < 1.0:
+        return None
+    start, depart = round(front - speed * lead, 2), round(t_at - lead, 1)
+    a = prog._vehicle(mut, sc, mut.rmap.lane(to_lane), start, speed, depart, [])
+    return [a], [], {}, (f"{a.id} on {to_lane} at {speed:.1f} m/s, {where} the ego as it changes lanes into it at "
+                         f"{at:.0f} m ({t_at:.1f} s)")
 
 
 def _goal(mut: Mutator, sc: Scenario) -> float:
@@ -325,15 +363,16 @@ def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
                          f"~{t_meet:.1f} s{how}")
 
 
-def walker_from_left(mut: Mutator, sc: Scenario, rng: random.Random, early=(-1.0, 1.5)):
+def walker_from_left(mut: Mutator, sc: Scenario, rng: random.Random, early=(-1.0, 1.5), at: float | None = None):
     """A walker crossing the ego's road from its left: the catalogue's crossing walker (who starts on the
     pavement of the ego's own edge, on its right where traffic keeps right) mirrored: it starts on the pavement
     of the road the other way and walks to that spot, leaving earlier by the time it takes to cross the other
     carriageway. The fairness rule for jaywalkers is applied here (the shared check cannot place a walker
-    whose pavement is off the ego's route): it steps onto the road while the ego can still stop."""
+    whose pavement is off the ego's route): it steps onto the road while the ego can still stop. ``at``: where
+    it crosses, as for the catalogue's."""
     from drivefuzz.search import fairness
 
-    built = cat.walker_crosses(mut, sc, rng, early=early)
+    built = cat.walker_crosses(mut, sc, rng, early=early, at=at)
     if built is None:
         return None
     a = built[0][0]

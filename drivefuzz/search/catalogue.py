@@ -198,12 +198,13 @@ def pulls_out(mut, sc, rng):
     return [a], [], {}, f"{a.id} pulls out on {lane} @ {pos:.1f} m at {depart} s"
 
 
-def walker_crosses(mut, sc, rng, early=(0.0, 4.0)):
+def walker_crosses(mut, sc, rng, early=(0.0, 4.0), at: float | None = None):
     """A pedestrian steps off the sidewalk in front of the ego, timed to meet it (a careful ego can stop): it
-    reaches the road ``early`` (a range [s]) before the ego is expected there."""
+    reaches the road ``early`` (a range [s]) before the ego is expected there; 20-100 m along the ego's route, or
+    at the route distance ``at`` [m]."""
     if not mut._walkable(sc):
         return None
-    d = rng.uniform(20.0, 100.0)
+    d = rng.uniform(20.0, 100.0) if at is None else at
     spot = mut._spot_along(sc, rng, d, PEDESTRIAN)
     if spot is None:
         return None

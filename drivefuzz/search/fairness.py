@@ -135,7 +135,8 @@ def unfair(mut: "Mutator", sc: Scenario, actor: Actor) -> str | None:
     # SUMO's lane position of a vehicle is its front bumper
     gap_behind = ego_front - EGO_LENGTH - d  # actor's front -> ego's rear
     gap_ahead = d - VEHICLE_LENGTH - ego_front  # ego's front -> actor's rear
-    beside = actor.nav is NavType.MANEUVER and actor.start_lane != _ego_lane_at(mut, sc, actor.start_lane)
+    beside = actor.nav is NavType.MANEUVER and \
+        actor.start_lane != _ego_lane_at(mut, sc, actor.start_lane, actor.start_pos)
     if gap_behind > -1.0:  # starts behind the ego
         if beside:  # on a lane beside the ego's: not its follower (its cut-ins are checked above)
             return None
@@ -169,7 +170,7 @@ def _ego_pose(mut: "Mutator", sc: Scenario, front: float) -> tuple[float, float,
     for i, e in enumerate(route):
         length = mut.rmap.edge(e).getLength()
         if pos <= length:
-            g = mut.rmap.geom(mut.ego_lane(sc, i))
+            g = mut.rmap.geom(mut.ego_lane_at(sc, i, pos))
             return g.position(min(max(pos, 0.0), g.length))
         pos -= length
     return None
@@ -205,11 +206,12 @@ def inserted_within_reach(mut: "Mutator", sc: Scenario, actor: Actor) -> str | N
     return None
 
 
-def _ego_lane_at(mut: "Mutator", sc: Scenario, lane_id: str) -> str | None:
-    """The lane the ego drives on ``lane_id``'s edge (None off its route)."""
+def _ego_lane_at(mut: "Mutator", sc: Scenario, lane_id: str, pos: float) -> str | None:
+    """The lane the ego is on at ``pos`` of ``lane_id``'s edge (before or after a lane change the route makes it
+    do there; None off its route)."""
     route = mut._route(sc)
     edge = mut.rmap.lane(lane_id).getEdge().getID()
-    return mut.ego_lane(sc, route.index(edge)) if edge in route else None
+    return mut.ego_lane_at(sc, route.index(edge), pos) if edge in route else None
 
 
 def _program_unfair(mut: "Mutator", actor: Actor) -> str | None:

@@ -124,7 +124,8 @@ class Mutator(RoutePlacement):
         self.rmap = rmap
         self.cfg = config or MutationConfig()
         self._route_cache: dict[tuple, tuple[str, ...]] = {}
-        self._ego_lanes: dict[tuple[str, str], list[str]] = {}  # (start lane, goal edge) -> lane per route edge
+        # (start lane, goal edge) -> per route edge (the lane the ego enters by, the lane it drives on)
+        self._ego_lanes: dict[tuple[str, str], list[tuple[str, str]]] = {}
         self._conflict_cache: dict[tuple, list] = {}
         self._profile_cache: dict[tuple, tuple[np.ndarray, np.ndarray]] = {}
         self._observed: dict[tuple, tuple[np.ndarray, float]] = {}  # mission -> a run's metres driven (observe)
@@ -136,36 +137,6 @@ class Mutator(RoutePlacement):
         if key not in self._route_cache:
             self._route_cache[key] = self.rmap.route(*key) or (sc.mission.start_edge,)
         return self._route_cache[key]
-
-    def ego_lane(self, sc: Scenario, i: int) -> str:
-        """The lane of route edge ``i`` the ego drives: its start lane on the first edge; after that the lane a
-        junction leads it into while that lane leads on along the route, else the lane nearest to it that does
-        (a lane-keeping driver: the first connection's lane, as before, was not the ego's on 8 of town's 27
-        route edges; issue 33)."""
-        if i == 0:
-            return sc.mission.start_lane
-        key = (sc.mission.start_lane, sc.mission.goal_edge)
-        if key not in self._ego_lanes:
-            self._ego_lanes[key] = self._lane_keeping(sc)
-        return self._ego_lanes[key][i]
-
-    def _lane_keeping(self, sc: Scenario) -> list[str]:
-        route, rmap = self._route(sc), self.rmap
-        lanes, cur = [], sc.mission.start_lane
-        for i, e in enumerate(route):
-            if rmap.lane(cur).getEdge().getID() != e:
-                cur = rmap.drive_lane(e)
-            conns = rmap.connections(e, route[i + 1]) if i + 1 < len(route) else []
-            leads = sorted({c[0] for c in conns})
-            if leads and cur not in leads:
-                idx = rmap.lane(cur).getIndex()
-                cur = min(leads, key=lambda ln: abs(rmap.lane(ln).getIndex() - idx))
-            lanes.append(cur)
-            if conns:
-                after = {c[0] for c in rmap.connections(route[i + 1], route[i + 2])} if i + 2 < len(route) else None
-                mine = [c for c in conns if c[0] == cur]
-                cur = next((c[1] for c in mine if after is None or c[1] in after), mine[0][1])
-        return lanes
 
     def _spot_along(self, sc: Scenario, rng: random.Random, dist: float, vclass: str,
                     ego_lane: bool = False) -> _Spot | None:

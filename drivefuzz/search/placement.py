@@ -1,7 +1,8 @@
 """Where the ego will be, and where an actor must start to meet it: the mutator's route geometry.
 
 :class:`RoutePlacement` is a mixin of :class:`drivefuzz.search.mutate.Mutator` (it uses its road map
-``rmap``, configuration ``cfg`` and ``_route``): the ego's expected motion along its route (a speed profile
+``rmap``, configuration ``cfg``, ``_route`` and caches): the lanes the ego drives along its route and where the
+route makes it change lanes, the ego's expected motion along its route (a speed profile
 of how the reference ADS drives the empty road), the junction passages and conflict points of the route,
 and the placement of linear actors timed to meet the ego there. The fairness rules and the situation
 catalogue use the same profile. Never imports libsumo.
@@ -28,8 +29,67 @@ JUNCTION_M = 1e-6
 #: [m/s^2] a light that turns yellow when the ego is nearer than it stops in at this is passed (ego/ads.py)
 LIGHT_STOP_DECEL = 4.0
 
+#: share of what the ego drives of a route edge after which it has changed to the lane the route needs (the
+#: reference ADS shifts its path over the middle third: on town and the highway its seed runs change lane 0.1-0.2 s
+#: after the profile reaches this share)
+LANE_CHANGE_AT = 0.45
+
 
 class RoutePlacement:
+    # ---------------------------------------------------------------- the ego's lanes
+    def ego_lane(self, sc: Scenario, i: int) -> str:
+        """The lane of route edge ``i`` the ego drives: its start lane on the first edge; after that the lane a
+        junction leads it into while that lane leads on along the route, else the lane nearest to it that does
+        (a lane-keeping driver: the first connection's lane, as before, was not the ego's on 8 of town's 27
+        route edges; issue 33)."""
+        return sc.mission.start_lane if i == 0 else self._lane_keeping(sc)[i][1]
+
+    def ego_entry_lane(self, sc: Scenario, i: int) -> str:
+        """The lane the ego enters route edge ``i`` by (its start lane on the first): where it is not the lane it
+        drives on to the next edge, the route makes the ego change lanes on that edge (:meth:`lane_change_at`)."""
+        return self._lane_keeping(sc)[i][0]
+
+    def lane_change_at(self, sc: Scenario, i: int) -> float | None:
+        """[m] the lane position on route edge ``i`` where the ego changes lanes, None where it does not: across
+        the middle of what it drives of the edge (:data:`LANE_CHANGE_AT`)."""
+        entry, lane = self._lane_keeping(sc)[i]
+        if entry == lane:
+            return None
+        a = sc.mission.start_pos if i == 0 else 0.0
+        return a + LANE_CHANGE_AT * (self.rmap.edge(self._route(sc)[i]).getLength() - a)
+
+    def ego_lane_at(self, sc: Scenario, i: int, pos: float) -> str:
+        """The lane the ego is on at lane position ``pos`` [m] of route edge ``i``: the lane it entered by before
+        its lane change there (:meth:`lane_change_at`), after it the lane it drives on to the next edge."""
+        entry, lane = self._lane_keeping(sc)[i]
+        at = self.lane_change_at(sc, i)
+        return entry if at is not None and pos < at else lane
+
+    def _lane_keeping(self, sc: Scenario) -> list[tuple[str, str]]:
+        """Per route edge (the lane the ego enters it by, the lane it drives on to the next)."""
+        key = (sc.mission.start_lane, sc.mission.goal_edge)
+        if key in self._ego_lanes:
+            return self._ego_lanes[key]
+        route, rmap = self._route(sc), self.rmap
+        lanes, cur = [], sc.mission.start_lane
+        for i, e in enumerate(route):
+            if rmap.lane(cur).getEdge().getID() != e:
+                cur = rmap.drive_lane(e)
+            entry = cur
+            conns = rmap.connections(e, route[i + 1]) if i + 1 < len(route) else []
+            leads = sorted({c[0] for c in conns})
+            if leads and cur not in leads:
+                idx = rmap.lane(cur).getIndex()
+                cur = min(leads, key=lambda ln: abs(rmap.lane(ln).getIndex() - idx))
+            lanes.append((entry, cur))
+            if conns:
+                after = {c[0] for c in rmap.connections(route[i + 1], route[i + 2])} if i + 2 < len(route) else None
+                mine = [c for c in conns if c[0] == cur]
+                cur = next((c[1] for c in mine if after is None or c[1] in after), mine[0][1])
+        self._ego_lanes[key] = lanes
+        return lanes
+
+    # ---------------------------------------------------------------- roads, and the ego's motion
     def _road_side(self, lane_id: str) -> float:
         """+1 when the rest of the road lies to the left of a walker's lane (a right-hand sidewalk, or the
         rightmost lane of a road without sidewalks), else -1."""

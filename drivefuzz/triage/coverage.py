@@ -42,7 +42,7 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from drivefuzz.sim.world import sun_glare
-from drivefuzz.triage.evidence import actor_track, frames_before, lane_changed, to_local, wrap_angle
+from drivefuzz.triage.evidence import actor_track, frames_before, lane_changed, lateral_shift, to_local, wrap_angle
 from drivefuzz.triage.signature import element as signature_element
 
 TTC_S = 3.0  #: [s] in-path time-to-collision under this is a close encounter
@@ -53,12 +53,16 @@ WINDOW_S = 3.0  #: [s] before the encounter over which the ego's manoeuvre is re
 APPROACH_S = 2.0  #: [s] before the encounter at which the other party's approach is read
 TURN = math.radians(30.0)  #: [rad] heading change that makes a turn
 SAME_LANE_M = 1.8  #: [m] lateral offset within which a same-direction vehicle is ahead / behind
+LANE_SHIFT_M = 1.0  #: [m] sideways on one edge over the window that makes a lane change (one under way counts)
 #: (upper bound [m/s], name) of the ego's speed bands
 SPEED_BANDS: tuple[tuple[float, str], ...] = ((2.8, "0-10 km/h"), (8.3, "10-30 km/h"), (16.7, "30-60 km/h"),
                                                (math.inf, "60+ km/h"))
 CONDITIONS = ("clear", "fog", "wet", "wind", "low_sun", "low_friction")
 FOG, WET, WIND = 30.0, 30.0, 40.0  #: weather levels (0-100) from which a condition counts
 LOW_MU = 0.6  #: [-] friction under an axle below this is a low-friction patch
+#: an encounter within this factor of a threshold (TTC under 4.5 s, PET under 3 s, gap under 2.25 m) but not
+#: under it is *near* its cells: the search goes on from it (:func:`near_cells`), no cell counts it
+NEAR = 1.5
 
 VEHICLE_APPROACHES = ("ahead", "behind", "left", "right", "rear_left", "rear_right", "oncoming",
                       "crossing_left", "crossing_right")
@@ -98,27 +102,32 @@ class Encounter:
 
 
 # ------------------------------------------------------------------------------------------- encounters
-def close_encounters(risk) -> list[tuple[str | None, int]]:
+def close_encounters(risk, near: bool = False) -> list[tuple[str | None, int]]:
     """``(actor, frame)`` of every close encounter in a :class:`~drivefuzz.search.risk.RiskScore`: per actor
-    the most severe of its qualifying TTC / PET / gap (value over threshold, smallest first), then grip."""
+    the most severe of its qualifying TTC / PET / gap (value over threshold, smallest first), then grip.
+    With ``near``: of every near one instead (the actor's most severe value within :data:`NEAR` of its
+    threshold but none under it; grip use from :data:`GRIP` / :data:`NEAR` up to :data:`GRIP`)."""
     best: dict[str, tuple[float, int]] = {}
     limits = {"ttc": TTC_S, "pet": PET_S, "gap": GAP_M}
+    top = NEAR if near else 1.0
     for actor, comp, value, frame in getattr(risk, "encounters", ()):
         sev = value / limits[comp]
-        if sev < 1.0 and (actor not in best or sev < best[actor][0]):
+        if sev < top and (actor not in best or sev < best[actor][0]):
             best[actor] = (sev, frame)
-    out: list[tuple[str | None, int]] = [(a, f) for a, (_, f) in sorted(best.items())]
-    if risk.grip is not None and risk.grip >= GRIP and risk.grip_frame is not None:
+    out: list[tuple[str | None, int]] = [(a, f) for a, (sev, f) in sorted(best.items()) if (sev >= 1.0) == near]
+    grip = risk.grip if risk.grip is not None else 0.0
+    if risk.grip_frame is not None and ((GRIP / NEAR <= grip < GRIP) if near else grip >= GRIP):
         out.append((None, int(risk.grip_frame)))
     return out
 
 
-def execution_cells(scenario, trace, rmap, risk) -> list[str]:
-    """The sorted, distinct cells of one execution's close encounters (what its journal record keeps)."""
+def execution_cells(scenario, trace, rmap, risk, near: bool = False) -> list[str]:
+    """The sorted, distinct cells of one execution's close encounters (what its journal record keeps); with
+    ``near``, of its near encounters (:data:`NEAR`)."""
     if trace is None or trace.n_frames == 0:
         return []
     cells: set[str] = set()
-    for actor, f in close_encounters(risk):
+    for actor, f in close_encounters(risk, near):
         try:
             cells.update(classify(scenario, trace, rmap, actor, f).cells())
         except (KeyError, ValueError, IndexError):  # a lane or link the map does not have: not classified, and
@@ -130,7 +139,7 @@ def classify(scenario, trace, rmap, actor: str | None, f: int) -> Encounter:
     """Classify the encounter with ``actor`` (None: grip) at frame ``f`` (see the module docstring)."""
     f = min(max(int(f), 0), trace.n_frames - 1)
     elem = element(scenario, trace, rmap, f)
-    return Encounter(actor, f, party(trace, actor, f), manoeuvre(trace, f, elem), elem,
+    return Encounter(actor, f, party(trace, actor, f), manoeuvre(trace, f, elem, rmap), elem,
                      speed_band(float(trace["speed"][f])), conditions(scenario, trace, f))
 
 
@@ -164,8 +173,10 @@ def party(trace, actor: str | None, f: int) -> str:
     return f"vehicle/rear_{side}" if lx < -half else f"vehicle/{side}"
 
 
-def manoeuvre(trace, f: int, elem: str) -> str:
-    """The ego's manoeuvre over the :data:`WINDOW_S` s up to ``f``; ``merge`` / ``roundabout`` on those elements."""
+def manoeuvre(trace, f: int, elem: str, rmap=None) -> str:
+    """The ego's manoeuvre over the :data:`WINDOW_S` s up to ``f``; ``merge`` / ``roundabout`` on those elements.
+    A lane change: the ego's lane changed on one edge, or (given ``rmap``) it moved :data:`LANE_SHIFT_M` sideways
+    on one (a lane change under way, or given up: a car met as the ego pulls out meets it in a lane change)."""
     speed = trace["speed"]
     w = frames_before(trace, f, WINDOW_S)
     base = "cruise"
@@ -176,7 +187,8 @@ def manoeuvre(trace, f: int, elem: str) -> str:
         turn = float(heading[-1] - heading[0]) if len(heading) > 1 else 0.0
         if abs(turn) >= TURN:
             base = "turn_left" if turn > 0 else "turn_right"
-        elif lane_changed(trace, f, WINDOW_S):
+        elif lane_changed(trace, f, WINDOW_S) or (rmap is not None and lateral_shift(trace, rmap, f, WINDOW_S)
+                                                   >= LANE_SHIFT_M):
             base = "lane_change"
         else:
             ax = trace["ax"][frames_before(trace, f, 1.0)]
@@ -397,15 +409,19 @@ def _end_heading(edge) -> float:
 # ------------------------------------------------------------------------------------------- a campaign
 def summarise(records: Iterable[Mapping[str, Any]], reach: Iterable[str]) -> dict[str, Any]:
     """A campaign's coverage from its journal records: per cell how often it was reached, in how many
-    executions that produced a finding or an incident, and how many executions the search aimed at it (their
-    ``mutation`` begins ``aim <cell>:``, :func:`aimed_cell`); reachable, reached, unreached; per projection too.
+    executions that produced a finding or an incident, how many executions the search aimed at it (their
+    ``mutation`` begins ``aim <cell>:``, :func:`aimed_cell`) and how many came near it (``near``: within
+    :data:`NEAR` of a threshold); reachable, reached, unreached; per projection too.
     A cell never reached that was aimed at is one the search tried and missed; one never aimed at, one it did
     not try (its job reached all it aimed at first, the budget ended, or the feedback aims at nothing: random,
     paper)."""
     reach = sorted(set(reach))
     hits: dict[str, dict[str, int]] = {}
     aims: dict[str, int] = {}
+    nears: dict[str, int] = {}
     for rec in records:
+        for c in rec.get("near") or ():
+            nears[c] = nears.get(c, 0) + 1
         for c in rec.get("cells") or ():
             h = hits.setdefault(c, {"count": 0, "findings": 0, "incidents": 0})
             h["count"] += 1
@@ -422,7 +438,8 @@ def summarise(records: Iterable[Mapping[str, Any]], reach: Iterable[str]) -> dic
     empty = {"count": 0, "findings": 0, "incidents": 0}
     return {"reachable": len(reach), "reached": len(reached),
             "share": round(len(reached) / len(reach), 4) if reach else 0.0,
-            "projections": per, "cells": {c: {**hits.get(c, empty), "aimed": aims.get(c, 0)} for c in reach},
+            "projections": per,
+            "cells": {c: {**hits.get(c, empty), "aimed": aims.get(c, 0), "near": nears.get(c, 0)} for c in reach},
             "outside": {c: h for c, h in sorted(hits.items()) if c not in set(reach)}}
 
 
@@ -490,6 +507,7 @@ class JournalCells:
                 if isinstance(rec, dict) and rec.get("event") == "end" and isinstance(rec.get("key"), str) \
                         and rec["key"] not in self.records:
                     self.records[rec["key"]] = {"cells": [c for c in rec.get("cells") or () if isinstance(c, str)],
+                                                "near": [c for c in rec.get("near") or () if isinstance(c, str)],
                                                 "finding": rec.get("finding"), "incident": rec.get("incident"),
                                                 "aim": aimed_cell(rec)}
                     new += 1
@@ -517,7 +535,7 @@ def campaign_coverage(out: str | Path, write: bool = True) -> dict[str, Any]:
 
 def format_coverage(cov: Mapping[str, Any]) -> str:
     """``drivefuzz coverage``'s text: the totals, then per projection the reached cells (how often, with
-    findings F and incidents I) and the cells never reached."""
+    findings F and incidents I) and the cells never reached (with the executions that came near them)."""
     lines = [f"coverage {cov['reached']}/{cov['reachable']} cells ({100.0 * cov['share']:.0f} %) over "
              f"{cov.get('executions', 0)} executions ({cov.get('with_cells', 0)} with a close encounter)"]
     cells = cov["cells"]
@@ -530,11 +548,12 @@ def format_coverage(cov: Mapping[str, Any]) -> str:
             if h["count"]:
                 marks = "".join(f"  {k[0].upper()}{h[k]}" for k in ("findings", "incidents") if h[k])
                 lines.append(f"  {h['count']:6d}  {c.split(':', 1)[1]}{marks}")
-        never = [(c.split(":", 1)[1], h.get("aimed", 0)) for c, h in mine if not h["count"]]
-        tried = [f"{c} ({n})" for c, n in sorted(never, key=lambda cn: -cn[1]) if n]
-        untried = [c for c, n in never if not n]
+        never = [(c.split(":", 1)[1], h.get("aimed", 0), h.get("near", 0)) for c, h in mine if not h["count"]]
+        tried = [f"{c} ({n}{f'; near {k}' if k else ''})" for c, n, k in sorted(never, key=lambda cn: -cn[1]) if n]
+        untried = [c + (f" (near {k})" if k else "") for c, n, k in never if not n]
         if tried:
-            lines.append(f"  never reached, aimed at and missed ({len(tried)}; aimed executions): " + ", ".join(tried))
+            lines.append(f"  never reached, aimed at and missed ({len(tried)}; aimed executions, and those that came "
+                         "near): " + ", ".join(tried))
         if untried:
             lines.append(f"  never reached, never aimed at ({len(untried)}): " + ", ".join(untried))
     if cov.get("outside"):

@@ -58,6 +58,7 @@ def grid_html(cov: Mapping[str, Any], name: str) -> str:
             title = (f"{r} / {c}: reached {h['count']}x, findings {h['findings']}, incidents {h['incidents']}, "
                      f"aimed at {h.get('aimed', 0)}x")
             if not h["count"]:
+                title += f", came near {h.get('near', 0)}x"
                 tds.append(f'<td class="never" title="{_e(title)}">0</td>')
                 continue
             cls = "hit" + (" found" if h["findings"] else "") + (" inc" if h["incidents"] else "")
@@ -92,7 +93,13 @@ def section_md(cov: Mapping[str, Any] | None) -> list[str]:
            f"{cov['reached']}/{cov['reachable']} reachable cells reached ({100.0 * cov['share']:.0f} %).", ""]
     for name, (a, b) in PROJECTIONS.items():
         p = cov["projections"][name]
-        never = [split(c)[1] + " / " + split(c)[2] + (f" (aimed {h['aimed']}x)" if h.get("aimed") else "")
+        never = [split(c)[1] + " / " + split(c)[2] + _tried(h)
                  for c, h in cov["cells"].items() if c.startswith(name + ":") and not h["count"]]
         out.append(f"- {a} x {b}: {p['reached']}/{p['reachable']}" + (f"; never: {', '.join(never)}" if never else ""))
     return out + [""]
+
+
+def _tried(h: dict) -> str:
+    """`` (aimed Nx, near Mx)`` for a cell never reached: the executions aimed at it and those that came near it."""
+    said = [f"{k} {h[k]}x" for k in ("aimed", "near") if h.get(k)]
+    return f" ({', '.join(said)})" if said else ""

@@ -200,6 +200,20 @@ def lane_changed(trace, f: int, seconds: float = LANE_CHANGE_WINDOW) -> bool:
     return any(a != b and lane_edge(a) == lane_edge(b) for a, b in zip(lanes, lanes[1:]))
 
 
+def lateral_shift(trace, rmap, f: int, seconds: float = LANE_CHANGE_WINDOW) -> float:
+    """[m] how far sideways the ego moved over ``seconds`` before ``f``, square to the lane it was on then (0 where
+    it was not on one normal edge all along): a lane change under way shows before the ego's centre crosses the
+    line."""
+    w = frames_before(trace, f, seconds)
+    k = w.start
+    lane, now = str(trace["lane"][k]), str(trace["lane"][f])
+    if not lane or lane.startswith(":") or not rmap.has_lane(lane) or lane_edge(now) != lane_edge(lane):
+        return 0.0
+    g = rmap.geom(lane)
+    return abs(g.project(float(trace["x"][f]), float(trace["y"][f]))[1]
+               - g.project(float(trace["x"][k]), float(trace["y"][k]))[1])
+
+
 def sideways_into(trace, rmap, oth: Track, f: int, side: str, seconds: float = 1.5) -> tuple[float, float] | None:
     """(ego's, other's) sideways movement [m] towards each other over ``seconds`` before ``f``, measured
     square to the lane the ego was on then, when the ego moved at least 0.5 m towards ``side`` and
