@@ -24,10 +24,6 @@ decides where lineages start and when they end:
   cells (:mod:`drivefuzz.triage.coverage`). A member whose cells include some the seed's job has not
   reached gets :meth:`Schedule.cell_bonus` added to its value (``cell_bonus`` per new cell, at most
   ``cell_bonus_max``), and enters the corpus whatever its risk: the search goes on from what moved coverage.
-  A member that came *near* a cell the job has not reached (an encounter within
-  :data:`drivefuzz.triage.coverage.NEAR` of a threshold: a time to collision of 4 s where 3 s makes a close
-  encounter) gets ``near_bonus`` per such cell and enters the corpus too: the lineage that goes on from it
-  under the risk feedback closes in on the cell (a gradient, where the aimed builds are a shot in the dark).
 
 With ``feedback="random"`` (the baseline) nothing here looks at the feedback: lineages run ``max_cycles``
 cycles and corpus entries are drawn uniformly, so that configurations differ only in what the feedback does.
@@ -66,8 +62,6 @@ class ScheduleConfig(BaseModel):
     corpus_risk: float = Field(default=0.3, ge=0.0, description="risk at which a new situation enters the corpus")
     cell_bonus: float = Field(default=0.25, ge=0.0, description="value added per interaction-coverage cell the "
                               "job had not reached (risk mode)")
-    near_bonus: float = Field(default=0.1, ge=0.0, description="value added per cell the job has not reached that "
-                              "a member came near (drivefuzz.triage.coverage.NEAR): the search goes on from it")
     cell_bonus_max: float = Field(default=0.75, ge=0.0, description="the most that new cells add to a value")
 
 
@@ -135,17 +129,14 @@ class Schedule:
             return 0
         return sum(1 for c in cells if c not in self.cells)
 
-    def cell_bonus(self, cells: list[str] | None, near: list[str] | None = None) -> float:
-        """The value added to a member for the cells it reached first and those it came near first (0 in the
-        other modes)."""
-        return min(self.cfg.cell_bonus * self.new_cells(cells) + self.cfg.near_bonus * self.new_cells(near),
-                   self.cfg.cell_bonus_max)
+    def cell_bonus(self, cells: list[str] | None) -> float:
+        """The value added to a member for the cells it reached first (0 in the other modes)."""
+        return min(self.cfg.cell_bonus * self.new_cells(cells), self.cfg.cell_bonus_max)
 
-    def is_new(self, situation: str | None, risk: float | None, cells: list[str] | None = None,
-               near: list[str] | None = None) -> bool:
-        """Whether an execution with ``situation``, ``risk`` and ``cells`` (``near``: the cells it came near)
-        reached new coverage or came near it (see the module docstring)."""
-        if self.new_cells(cells) or self.new_cells(near):
+    def is_new(self, situation: str | None, risk: float | None, cells: list[str] | None = None) -> bool:
+        """Whether an execution with ``situation``, ``risk`` and ``cells`` reached new coverage (see the
+        module docstring)."""
+        if self.new_cells(cells):
             return True
         return (self.mode in GUIDED and bool(situation) and situation not in self.seen
                 and risk is not None and risk >= self.cfg.corpus_risk)
