@@ -334,8 +334,8 @@ def _crossing(mut, sc, rng, want: str, col: str, at: float | None = None):
     at ``at`` where given)."""
     marks = _marks(mut, sc)
     spots = _junction_spots(marks, col)
-    if at is not None and col in JUNCTION_COLUMNS:
-        spots = [at]
+    if at is not None and col in JUNCTION_COLUMNS:  # a turn's place is 2-8 m past its junction's stop line
+        spots = [s for s, *_ in marks["junctions"] if s <= at <= s + 10.0]
     nodes = None if spots is None else {n for s, _, _, _, n in marks["junctions"] if s in spots}
     route = mut._route(sc)
 
