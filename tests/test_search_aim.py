@@ -149,19 +149,6 @@ def test_half_the_aimed_components_are_built_on_the_mission_alone(mut, town_seed
 
 
 def test_a_job_stops_aiming_at_a_cell_its_aims_keep_missing():
-    # a cell goes to a seed whose mission the mutator can aim at it, where one can (before, 54 of the 185 went to
-    # one that cannot: a car from the right at a yield sign to seed 005, whose A2 has no road from the right)
-    from drivefuzz.campaign.job import can_aim
-
-    built = share_cells(reaches, lambda i, c: can_aim(rmap, town_seeds[i], c, i))
-    owner = {c: i for i, cells in enumerate(built) for c in cells}
-    stuck = [c for c, i in owner.items() if not can_aim(rmap, town_seeds[i], c, i)]
-    assert all(not can_aim(rmap, town_seeds[i], c, i) for c in stuck for i, r in enumerate(reaches) if c in r)
-    assert len(stuck) <= 15 and sum(not can_aim(rmap, town_seeds[i], c, i) for c, i in
-                                    {c: i for i, cells in enumerate(shares) for c in cells}.items()) >= 40
-    cell = "party-element:vehicle/crossing_right|yield"
-    assert not can_aim(rmap, town_seeds[5], cell, 5) and cell in shares[5] and cell in built[2]
-
     a, b, c = "party-element:vehicle/ahead|edge", "party-manoeuvre:vehicle/behind|brake", "speed-condition:0-10 km/h|fog"
     misses: dict[str, int] = {}
     recs = [{"mutation": f"aim {a}: situation lead_stopped; weather fog 0 -> 3", "cells": [b]},
@@ -212,6 +199,19 @@ def test_a_campaign_shares_its_cells_among_its_seed_jobs(town_seeds):
     assert sizes[-1] - sizes[0] <= 1, sizes  # town's seeds offer most cells: the shares differ by one at most
     # a cell one seed alone offers goes to that seed
     assert share_cells([["a", "b"], ["b"], ["b", "c"]]) == [["a"], ["b"], ["c"]]
+    # a cell goes to a seed whose mission the mutator can aim at it, where one can (before, 54 of the 185 went to
+    # one that cannot: a car from the right at a yield sign to seed 005, whose A2 has no road from the right)
+    from drivefuzz.campaign.job import can_aim
+
+    built = share_cells(reaches, lambda i, c: can_aim(rmap, town_seeds[i], c, i))
+    owner = {c: i for i, cells in enumerate(built) for c in cells}
+    stuck = [c for c, i in owner.items() if not can_aim(rmap, town_seeds[i], c, i)]
+    assert all(not can_aim(rmap, town_seeds[i], c, i) for c in stuck for i, r in enumerate(reaches) if c in r)
+    assert len(stuck) <= 15 and sum(not can_aim(rmap, town_seeds[i], c, i) for c, i in
+                                    {c: i for i, cells in enumerate(shares) for c in cells}.items()) >= 40
+    cell = "party-element:vehicle/crossing_right|yield"
+    assert not can_aim(rmap, town_seeds[5], cell, 5) and cell in shares[5] and cell in built[2]
+
 
     # a cell goes to a seed whose mission the mutator can aim at it, where one can (before, 54 of the 185 went to
     # one that cannot: a car from the right at a yield sign to seed 005, whose A2 has no road from the right)
