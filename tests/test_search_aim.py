@@ -212,20 +212,6 @@ def test_a_campaign_shares_its_cells_among_its_seed_jobs(town_seeds):
     cell = "party-element:vehicle/crossing_right|yield"
     assert not can_aim(rmap, town_seeds[5], cell, 5) and cell in shares[5] and cell in built[2]
 
-
-    # a cell goes to a seed whose mission the mutator can aim at it, where one can (before, 54 of the 185 went to
-    # one that cannot: a car from the right at a yield sign to seed 005, whose A2 has no road from the right)
-    from drivefuzz.campaign.job import can_aim
-
-    built = share_cells(reaches, lambda i, c: can_aim(rmap, town_seeds[i], c, i))
-    owner = {c: i for i, cells in enumerate(built) for c in cells}
-    stuck = [c for c, i in owner.items() if not can_aim(rmap, town_seeds[i], c, i)]
-    assert all(not can_aim(rmap, town_seeds[i], c, i) for c in stuck for i, r in enumerate(reaches) if c in r)
-    assert len(stuck) <= 15 and sum(not can_aim(rmap, town_seeds[i], c, i) for c, i in
-                                    {c: i for i, cells in enumerate(shares) for c in cells}.items()) >= 40
-    cell = "party-element:vehicle/crossing_right|yield"
-    assert not can_aim(rmap, town_seeds[5], cell, 5) and cell in shares[5] and cell in built[2]
-
     a, b, c = "party-element:vehicle/ahead|edge", "party-manoeuvre:vehicle/behind|brake", "speed-condition:0-10 km/h|fog"
     assert aim_cells([a, b, c], set(), {}, own=[c]) == [c]
     assert aim_cells([a, b, c], {c}, {}, own=[c]) == [a, b]  # its share reached: the seed's other cells
