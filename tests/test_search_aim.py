@@ -11,7 +11,7 @@ from drivefuzz.campaign.fuzz import Campaign, FuzzConfig
 from drivefuzz.oracle import OracleSettings
 from drivefuzz.scenario import Weather
 from drivefuzz.scenario.roadmap import load_roadmap
-from drivefuzz.campaign.job import BLOCKED_MISS, aim_cells, count_misses, share_cells
+from drivefuzz.campaign.aiming import BLOCKED_MISS, aim_cells, count_misses, share_cells
 from drivefuzz.search.aim import BLOCKED_LANE
 from drivefuzz.search.aim import _lateral, aimed, pick_cell
 from drivefuzz.search.effect import effect_hash
@@ -201,7 +201,7 @@ def test_a_campaign_shares_its_cells_among_its_seed_jobs(town_seeds):
     assert share_cells([["a", "b"], ["b"], ["b", "c"]]) == [["a"], ["b"], ["c"]]
     # a cell goes to a seed whose mission the mutator can aim at it, where one can (before, 54 of the 185 went to
     # one that cannot: a car from the right at a yield sign to seed 005, whose A2 has no road from the right)
-    from drivefuzz.campaign.job import can_aim
+    from drivefuzz.campaign.aiming import can_aim
 
     built = share_cells(reaches, lambda i, c: can_aim(rmap, town_seeds[i], c, i))
     owner = {c: i for i, cells in enumerate(built) for c in cells}

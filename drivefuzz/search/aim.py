@@ -68,7 +68,7 @@ INTO_LANE = {"vehicle/behind": ("behind", None), "vehicle/rear_left": ("rear", "
 #: all bare, cell hits 10 % and coverage 66.0 %; none bare, 8 % and 66.0 %: half and half keeps both kinds
 BARE_SHARE = 0.5
 #: how an aimed lane change around a stopped car says so (the job stops building them for an ADS that never passes
-#: one: :func:`drivefuzz.campaign.job.aim_cells`)
+#: one: :func:`drivefuzz.campaign.aiming.aim_cells`)
 BLOCKED_LANE = "a stopped car to pass"
 #: [m/s] bounds of the speed bands (drivefuzz.triage.coverage.SPEED_BANDS), by band name
 BANDS = {"0-10 km/h": (0.0, 2.8), "10-30 km/h": (2.8, 8.3), "30-60 km/h": (8.3, 16.7), "60+ km/h": (16.7, 99.0)}

@@ -1,0 +1,112 @@
+"""Which interaction-coverage cells a fuzz job aims the mutator at (:mod:`drivefuzz.search.aim` builds for them).
+
+A campaign's seed jobs run in parallel and each knows only what it has reached itself, so every reachable cell
+falls to one of them (:func:`share_cells`, by what the mutator can aim at on each seed's mission:
+:func:`can_aim`); a job aims at its share first, then at its seed's other unreached cells, and gives up on a
+cell its aimed builds keep missing (:func:`aim_cells`, :func:`count_misses`). Everything here is a pure function
+of the manifest's seeds and the job's own results, so a resumed job aims as the first run did.
+"""
+
+from __future__ import annotations
+
+import random
+from typing import Any, Callable
+
+from drivefuzz.search.aim import BLOCKED_LANE
+from drivefuzz.triage.coverage import aimed_cell
+
+#: a job stops aiming at a cell once this many of its aimed builds missed it (while it has other cells to aim at)
+AIM_MISSES = 3
+#: the misses of aimed lane changes around a stopped car, kept with the cells' (:func:`aim_cells`)
+BLOCKED_MISS = "lane_change around a stopped car"
+
+
+_REACH: dict[tuple, list[str]] = {}
+
+
+def _seed_reachable(rmap, seed_sc) -> list[str]:
+    """The interaction-coverage cells the seed's network and route offer (cached per process)."""
+    from drivefuzz.triage.coverage import reachable
+
+    key = (str(rmap.path), seed_sc.mission.start_lane, seed_sc.mission.start_pos, seed_sc.mission.goal_edge)
+    if key not in _REACH:
+        _REACH[key] = reachable(rmap, [seed_sc])
+    return _REACH[key]
+
+
+def share_cells(reaches: list[list[str]], builds: Callable[[int, str], bool] | None = None) -> list[list[str]]:
+    """Each seed job's share of the campaign's reachable cells: every cell goes to one of the seeds that offer it
+    (``reaches[i]``: seed i's cells), the cells fewest seeds offer first, each to the offering seed with the
+    smallest share so far (the lower index on a tie) among those whose mission the mutator can aim at it
+    (``builds(i, cell)``, :func:`can_aim`; where none can, among all). A pure function of the seeds, so every job
+    computes the same shares alone, without hearing from the others (they run in parallel: a campaign-wide count
+    of what was reached would make a job's draws depend on the others' timing). Without it every job aims at all
+    its seed's cells, and eight town jobs aim at the same ~80 unreached cells, each a few times."""
+    offered: dict[str, list[int]] = {}
+    for i, cells in enumerate(reaches):
+        for c in cells:
+            offered.setdefault(c, []).append(i)
+    shares: list[list[str]] = [[] for _ in reaches]
+    for c in sorted(offered, key=lambda c: (len(offered[c]), c)):
+        order = sorted(offered[c], key=lambda i: (len(shares[i]), i))
+        i = next((i for i in order if builds is None or builds(i, c)), order[0])
+        shares[i].append(c)
+    return [sorted(s) for s in shares]
+
+
+#: draws of an aimed build per (seed, cell) before :func:`can_aim` says no
+AIM_TRIES = 3
+_CAN_AIM: dict[tuple, bool] = {}
+
+
+def can_aim(rmap, seed_sc, cell: str, index: int) -> bool:
+    """Whether the mutator, without a profile of any ADS (a job knows only its own seed's run), can aim at ``cell``
+    on the mission of seed ``index`` in :data:`AIM_TRIES` draws (1-2 ms each; cached per process). On town a
+    quarter of the (seed, cell) pairs the derivation offers it cannot (the derivation over-approximates): seed
+    005's yield junction A2 has no road from the right that a crossing car can be timed on, B0 on seed 002 has.
+    Sharing by offer alone gave 54 of town's 185 cells to a seed that cannot aim at them (a car from the right at
+    a yield sign to seed 005: seed 002 never aimed at it), now 13, those no seed can."""
+    from drivefuzz.search.aim import aimed
+    from drivefuzz.search.mutate import Mutator
+
+    key = (str(rmap.path), seed_sc.content_hash(), cell, index)
+    if key not in _CAN_AIM:
+        mut = _MUTATORS.setdefault(str(rmap.path), Mutator(rmap))
+        _CAN_AIM[key] = any(aimed(mut, seed_sc, cell, random.Random(f"share/{index}/{cell}/{k}"))[0].scenario
+                            is not seed_sc for k in range(AIM_TRIES))
+    return _CAN_AIM[key]
+
+
+_MUTATORS: dict[str, Any] = {}
+
+
+def aim_cells(reach, reached, misses: dict[str, int], own=()) -> list[str]:
+    """The cells a job aims at: its share of the campaign's cells (``own``, :func:`share_cells`) not reached yet
+    by it; when it has reached them all, its seed's other reachable cells not reached yet. Less, in both, those
+    its aimed builds have missed :data:`AIM_MISSES` times (the aims spread over the others), and every lane-change
+    cell once that many lane changes around a stopped car ended with the ego still in its lane (an ADS that waits
+    behind a stopped car, as the reference ADS does, makes each of them one more execution of the same finding);
+    all unreached ones when every one has."""
+    unreached = [c for c in reach if c not in reached]
+    own = set(own)
+    waits = misses.get(BLOCKED_MISS, 0) >= AIM_MISSES
+    for cells in ([c for c in unreached if c in own], unreached):
+        aim = [c for c in cells if misses.get(c, 0) < AIM_MISSES and not (waits and c.endswith("|lane_change"))]
+        if aim:
+            return aim
+    return unreached
+
+
+def count_misses(misses: dict[str, int], recs: list[dict[str, Any]]) -> None:
+    """Add to ``misses`` the members of a cycle that were aimed at a cell (their ``mutation`` begins ``aim <cell>:``)
+    and did not reach it, and under :data:`BLOCKED_MISS` the lane changes around a stopped car in which the ego
+    changed no lane. Counted at the end of each cycle and kept in the checkpoint, as the schedule's cells are,
+    so a resumed job aims as the first run did."""
+    for rec in recs:
+        cell = aimed_cell(rec)
+        cells = rec.get("cells") or ()
+        if cell and cell not in cells:
+            misses[cell] = misses.get(cell, 0) + 1
+            if cell.endswith("|lane_change") and f": {BLOCKED_LANE}:" in rec.get("mutation", "") \
+                    and not any(c.endswith("|lane_change") for c in cells):
+                misses[BLOCKED_MISS] = misses.get(BLOCKED_MISS, 0) + 1
