@@ -70,6 +70,8 @@ from drivefuzz.triage.store import FindingStore, TriageConfig
 from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
 
 STOP_FILE = "STOP"
+#: the campaign's cells shared among its seed jobs (campaign.aiming.share_cells), written by the first job
+SHARES_FILE = "aim_shares.json"
 #: Draws of a population member that repeats (in effect) an execution of its job, its parent or a sibling
 #: before the member is skipped (it is not run: a repeat would only cost the time of an execution).
 MAX_REDRAWS = 8
@@ -343,12 +345,24 @@ class SeedJob:
     def _own_cells(self, rmap, reach) -> list[str]:
         """The cells of :func:`share_cells` that fall to this job, from the manifest's seeds (all of one network
         in a campaign; a seed on another network offers none of this one's cells). Every job reads the same seed
-        files, so all compute the same shares."""
+        files, so all compute the same shares; the first to finish writes them to the campaign folder
+        (:data:`SHARES_FILE`, about 1 s of aimed builds saved for each later job and a resume)."""
+        path = self.out / SHARES_FILE
+        try:
+            shares = json.loads(path.read_text())
+            if isinstance(shares, list) and len(shares) == len(self.seed_refs) and \
+                    all(isinstance(x, list) and all(isinstance(c, str) for c in x) for x in shares):
+                return shares[self.si]
+        except (OSError, ValueError):
+            pass
         seeds = [load_scenario(self.out / ref) for ref in self.seed_refs]
         same = [sc.network_path() == self.seed.network_path() for sc in seeds]
         reaches = [(reach if i == self.si else _seed_reachable(rmap, sc)) if ok else []
                    for i, (sc, ok) in enumerate(zip(seeds, same))]
-        return share_cells(reaches, lambda i, c: can_aim(rmap, seeds[i], c, i))[self.si]
+        shares = share_cells(reaches, lambda i, c: can_aim(rmap, seeds[i], c, i))
+        if all(same):  # a campaign over several networks: each network's jobs share among their own seeds
+            atomic_write_json(path, shares)
+        return shares[self.si]
 
     def _select(self, members: list[tuple[dict[str, Any], Any]], schedule, rng: random.Random):
         """(corpus folder, riskiest actor, feedback value) of the member that becomes the next scenario, or
