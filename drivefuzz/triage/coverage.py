@@ -162,7 +162,8 @@ def party(trace, actor: str | None, f: int) -> str:
         dh = abs(wrap_angle(math.atan2(dy, dx) - float(trace["heading"][k])))
         return f"pedestrian/crossing_{side}" if math.pi / 4 < dh < 3 * math.pi / 4 else "pedestrian/along"
     dh = abs(wrap_angle(float(track.heading[k]) - float(trace["heading"][k])))
-    moving = float(np.nanmax(track.speed[k:f + 1])) > 0.5
+    with np.errstate(invalid="ignore"):  # NaN where it was not there: not moving
+        moving = bool(np.any(np.asarray(track.speed[k:f + 1], dtype=float) > 0.5))
     if moving and dh >= 3 * math.pi / 4:
         return "vehicle/oncoming"
     if moving and dh > math.pi / 4:
