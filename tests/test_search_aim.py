@@ -273,3 +273,23 @@ def test_member_values_of_the_guided_feedbacks():
     assert member_value("coverage", 0.9, 1.0, 0, 0.0) < member_value("coverage", 0.1, 1.0, 1, 0.25)
     assert member_value("product", 0.5, 2.0, 2, 0.5) == pytest.approx(3.0)
     assert member_value("paper", 0.5, 1.0, 3, 0.0) == pytest.approx(0.5)
+
+
+def test_the_shares_come_from_the_disk_cache_the_second_time(town_seeds, tmp_path, monkeypatch):
+    """A campaign on the same seeds reads its cell shares from the cache of network-derived data: the same
+    shares, without the aimed draws; a corrupt entry is computed again."""
+    from drivefuzz.campaign import aiming
+
+    monkeypatch.setenv("DRIVEFUZZ_CACHE", str(tmp_path))
+    seeds = town_seeds[:3]
+    rmap = load_roadmap(seeds[0].network_path())
+    want = share_cells([aiming._seed_reachable(rmap, sc) for sc in seeds],
+                       lambda i, c: aiming.can_aim(rmap, seeds[i], c, i))
+    assert aiming.cached_shares(rmap, seeds) == want
+    (entry,) = tmp_path.glob("*.npz")
+    monkeypatch.setattr(aiming, "can_aim", lambda *a: pytest.fail("the cached shares were built again"))
+    assert aiming.cached_shares(rmap, seeds) == want
+    entry.write_bytes(b"not a zip")
+    monkeypatch.undo()
+    monkeypatch.setenv("DRIVEFUZZ_CACHE", str(tmp_path))
+    assert aiming.cached_shares(rmap, seeds) == want

@@ -110,3 +110,45 @@ def count_misses(misses: dict[str, int], recs: list[dict[str, Any]]) -> None:
             if cell.endswith("|lane_change") and f": {BLOCKED_LANE}:" in rec.get("mutation", "") \
                     and not any(c.endswith("|lane_change") for c in cells):
                 misses[BLOCKED_MISS] = misses.get(BLOCKED_MISS, 0) + 1
+
+
+#: the modules whose code decides what can be aimed at: any edit to one of them invalidates cached shares
+_AIM_CODE = ("campaign/aiming.py", "search/aim.py", "search/aim_place.py", "search/catalogue.py",
+             "search/programs.py", "search/fairness.py", "search/placement.py", "search/mutate.py",
+             "triage/coverage.py", "scenario/roadmap.py")
+
+
+def cached_shares(rmap, seeds: list) -> list[list[str]]:
+    """:func:`share_cells` of ``seeds`` (all on ``rmap``'s network) by :func:`can_aim`, through the disk cache of
+    network-derived data (:mod:`drivefuzz.netcache`, keyed by the network's bytes, the seeds' contents and the
+    code of the aiming modules): a campaign on the same seeds does not build the 200-500 aimed draws again
+    (1-2 s, which a 60-execution campaign spent in start-up). A missing or unreadable entry is computed again."""
+    import hashlib
+    from pathlib import Path
+
+    import numpy as np
+
+    from drivefuzz import netcache
+
+    root = Path(__file__).resolve().parent.parent
+    missions = hashlib.sha256("|".join(sc.content_hash() for sc in seeds).encode()).hexdigest()[:24]
+    try:
+        code = hashlib.sha256("".join(netcache.file_sha256(root / m) for m in _AIM_CODE).encode()).hexdigest()[:16]
+    except OSError:
+        code = None
+    key = netcache.entry_key(rmap.path, __file__, "aim-shares", missions, code) if code else None
+    got = netcache.load(key)
+    if got is not None and "cells" in got and got["cells"].dtype.kind == "U" and got["cells"].ndim == 1:
+        shares: list[list[str]] = [[] for _ in seeds]
+        try:
+            for line in got["cells"].tolist():
+                i, cell = line.split("\t", 1)
+                shares[int(i)].append(cell)
+            return shares
+        except (ValueError, IndexError):
+            pass
+    reaches = [_seed_reachable(rmap, sc) for sc in seeds]
+    shares = share_cells(reaches, lambda i, c: can_aim(rmap, seeds[i], c, i))
+    netcache.store(key, {"cells": np.array([f"{i}\t{c}" for i, cells in enumerate(shares) for c in cells] or [""])})
+    return shares
+

@@ -60,7 +60,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import drivefuzz
-from drivefuzz.campaign.aiming import _seed_reachable, aim_cells, can_aim, count_misses, share_cells
+from drivefuzz.campaign.aiming import _seed_reachable, aim_cells, cached_shares, can_aim, count_misses, share_cells
 from drivefuzz.campaign.config import FuzzConfig
 from drivefuzz.oracle import Misbehavior
 from drivefuzz.storage import atomic_write_json, atomic_write_text
@@ -346,7 +346,8 @@ class SeedJob:
         """The cells of :func:`share_cells` that fall to this job, from the manifest's seeds (all of one network
         in a campaign; a seed on another network offers none of this one's cells). Every job reads the same seed
         files, so all compute the same shares; the first to finish writes them to the campaign folder
-        (:data:`SHARES_FILE`, about 1 s of aimed builds saved for each later job and a resume)."""
+        (:data:`SHARES_FILE`, about 1 s of aimed builds saved for each later job and a resume), and to the disk
+        cache of network-derived data for the next campaign on the same seeds (:func:`cached_shares`)."""
         path = self.out / SHARES_FILE
         try:
             shares = json.loads(path.read_text())
@@ -357,12 +358,13 @@ class SeedJob:
             pass
         seeds = [load_scenario(self.out / ref) for ref in self.seed_refs]
         same = [sc.network_path() == self.seed.network_path() for sc in seeds]
+        if all(same):  # a campaign over several networks: each network's jobs share among their own seeds
+            shares = cached_shares(rmap, seeds)
+            atomic_write_json(path, shares)
+            return shares[self.si]
         reaches = [(reach if i == self.si else _seed_reachable(rmap, sc)) if ok else []
                    for i, (sc, ok) in enumerate(zip(seeds, same))]
-        shares = share_cells(reaches, lambda i, c: can_aim(rmap, seeds[i], c, i))
-        if all(same):  # a campaign over several networks: each network's jobs share among their own seeds
-            atomic_write_json(path, shares)
-        return shares[self.si]
+        return share_cells(reaches, lambda i, c: can_aim(rmap, seeds[i], c, i))[self.si]
 
     def _select(self, members: list[tuple[dict[str, Any], Any]], schedule, rng: random.Random):
         """(corpus folder, riskiest actor, feedback value) of the member that becomes the next scenario, or
