@@ -65,7 +65,7 @@ def can_aim(rmap, seed_sc, cell: str, index: int) -> bool:
     quarter of the (seed, cell) pairs the derivation offers it cannot (the derivation over-approximates): seed
     005's yield junction A2 has no road from the right that a crossing car can be timed on, B0 on seed 002 has.
     Sharing by offer alone gave 54 of town's 185 cells to a seed that cannot aim at them (a car from the right at
-    a yield sign to seed 005: seed 002 never aimed at it), now 13, those no seed can."""
+    a yield sign to seed 005: seed 002 never aimed at it), now 10, those no seed can."""
     from drivefuzz.search.aim import aimed
     from drivefuzz.search.mutate import Mutator
 
@@ -115,7 +115,8 @@ def count_misses(misses: dict[str, int], recs: list[dict[str, Any]]) -> None:
 #: the modules whose code decides what can be aimed at: any edit to one of them invalidates cached shares
 _AIM_CODE = ("campaign/aiming.py", "search/aim.py", "search/aim_place.py", "search/catalogue.py",
              "search/programs.py", "search/fairness.py", "search/placement.py", "search/mutate.py",
-             "triage/coverage.py", "scenario/roadmap.py")
+             "triage/coverage.py", "scenario/roadmap.py", "scenario/model.py", "scenario/signals.py",
+             "scenario/conflicts.py")
 
 
 def cached_shares(rmap, seeds: list) -> list[list[str]]:
