@@ -61,7 +61,8 @@ CONDITIONS = ("clear", "fog", "wet", "wind", "low_sun", "low_friction")
 FOG, WET, WIND = 30.0, 30.0, 40.0  #: weather levels (0-100) from which a condition counts
 LOW_MU = 0.6  #: [-] friction under an axle below this is a low-friction patch
 #: an encounter within this factor of a threshold (TTC under 4.5 s, PET under 3 s, gap under 2.25 m) but not
-#: under it is *near* its cells: the search goes on from it (:func:`near_cells`), no cell counts it
+#: under it is *near* its cells: no cell counts it; the journal keeps them (``near``) and ``drivefuzz coverage``
+#: says how often each cell never reached was come near
 NEAR = 1.5
 
 VEHICLE_APPROACHES = ("ahead", "behind", "left", "right", "rear_left", "rear_right", "oncoming",
