@@ -71,7 +71,9 @@ def can_aim(rmap, seed_sc, cell: str, index: int) -> bool:
 
     key = (str(rmap.path), seed_sc.content_hash(), cell, index)
     if key not in _CAN_AIM:
-        mut = _MUTATORS.setdefault(str(rmap.path), Mutator(rmap))
+        mut = _MUTATORS.get(str(rmap.path))
+        if mut is None:  # one per network and process (setdefault would build a new one on every call)
+            mut = _MUTATORS[str(rmap.path)] = Mutator(rmap)
         _CAN_AIM[key] = any(aimed(mut, seed_sc, cell, random.Random(f"share/{index}/{cell}/{k}"))[0].scenario
                             is not seed_sc for k in range(AIM_TRIES))
     return _CAN_AIM[key]

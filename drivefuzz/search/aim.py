@@ -120,7 +120,7 @@ def _aimed_party(mut: Mutator, sc: Scenario, cell: str, row: str, col: str, rng:
         if where and fit:  # a car on the lane the ego changes into, where the cell wants it
             situation = Situation("into_lane", "", partial(into_lane, move=rng.choice(fit), where=where))
             m = add_situation(mut, sc, situation, rng)
-            return Mutation(sc if m.scenario is sc else m.scenario, f"aim {cell}: {m.description}", m.retries)
+            return Mutation(m.scenario, f"aim {cell}: {m.description}", m.retries)
         base, at, setup = (sc, rng.choice(moves)[0], "") if moves else _blocked_lane(mut, sc, rng)
     if col in JUNCTION_COLUMNS + ("lane_change",) and at is None:
         return Mutation(sc, f"aim {cell}: the route has no place for it")
