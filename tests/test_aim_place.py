@@ -157,10 +157,10 @@ def _side_encounters(mut, seeds, build, rows):
         new = sc.model_copy(update={"actors": sc.actors + tuple(b[0])})
         ex = execute(new)
         r = risk_score(ex.trace)
-        parties = {classify(new, ex.trace, mut.rmap, a, f).party for a, f in close_encounters(r) if a == b[0][0].id}
-        if parties & set(rows):
+        mine = [(c, v, classify(new, ex.trace, mut.rmap, a, f).party) for a, c, v, f in r.episodes if a == b[0][0].id]
+        if any(p in rows for _, _, p in mine):
             met += 1
-            gaps.append(r.gap)
+            gaps += [v for c, v, p in mine if c == "gap" and p in rows]  # the least gap of each such encounter
         crashes += any(m.oracle == "collision" for m in ex.misbehaviors)
     return built, met, gaps, crashes
 
@@ -398,3 +398,29 @@ def test_a_walker_crosses_just_past_the_ego_s_lane_change(mut, town_seeds):
             met += any(f"{e.party}|{e.manoeuvre}" == "pedestrian/crossing_left|lane_change"
                        for e in (classify(new, ex.trace, mut.rmap, a, f) for a, f in close_encounters(r)))
     assert built >= 6 and met >= 3, (built, met)
+
+
+def test_a_car_standing_just_past_a_turn_meets_the_ego_ahead_while_it_turns(mut, town_seeds):
+    """Aimed at a car ahead in a turn, a car stands on the lane the turn leads into, 6-22 m past the junction, and
+    drives on after the ego came: the ego meets it ahead while it still turns, and does not wait behind it until
+    the immobility oracle fires. (The catalogue's cars ahead start before the junction: 0 of 7 aimed builds met
+    the ego in a left turn on town's seeds; read in the ego's body frame 2 s before, a car on the lane the ego
+    turns into was beside it.)"""
+    from drivefuzz.search.aim_place import stopped_past
+
+    built = met = 0
+    for k, sc in enumerate(town_seeds):
+        for col in ("turn_left", "turn_right"):
+            _, at, _ = meeting(mut, sc, col, random.Random(k))
+            b = None if at is None else stopped_past(mut, sc, random.Random(k), at)
+            if b is None:
+                continue
+            new = sc.model_copy(update={"actors": sc.actors + tuple(b[0])})
+            assert unfair(mut, new, b[0][0]) is None
+            built += 1
+            ex = execute(new)
+            assert not ex.misbehaviors, (k, col, ex.misbehaviors)
+            r = risk_score(ex.trace)
+            met += any(f"{e.party}|{e.manoeuvre}" == f"vehicle/ahead|{col}"
+                       for e in (classify(new, ex.trace, mut.rmap, a, f) for a, f in close_encounters(r)))
+    assert built >= 8 and met >= built // 2, (built, met)

@@ -13,13 +13,14 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from drivefuzz.scenario import Actor, Mission, Scenario, SimOptions
 from drivefuzz.scenario.model import Weather
 from drivefuzz.scenario.roadmap import load_roadmap
-from drivefuzz.scenario.sumofiles import load_scenario
+from drivefuzz.scenario.sumofiles import load_scenario, read_scenario
 from drivefuzz.search.schedule import Schedule, ScheduleConfig
 from drivefuzz.triage.coverage import (
     CONDITIONS,
@@ -115,10 +116,12 @@ def test_a_run_without_actors_has_no_cells_unless_the_tyres_near_their_limit(tow
     assert enc == {} and cells == []
     assert close_encounters(RiskScore(score=0.0, grip=0.9, grip_frame=12)) == [(None, 12)]
     assert close_encounters(RiskScore(score=0.0, grip=0.5, grip_frame=12)) == []
-    # the thresholds: TTC 3 s, PET 2 s, gap 1.5 m; per actor the most severe one's frame
+    # the close ones are the episodes (test_an_actor_close_twice_is_two_encounters), an actor's per component
+    # extremes are for the near ones
     r = RiskScore(score=0.0, encounters=(("a", "ttc", 2.9, 5), ("a", "gap", 0.3, 9), ("b", "ttc", 3.1, 4),
-                                         ("c", "pet", 1.9, 7)))
-    assert close_encounters(r) == [("a", 9), ("c", 7)]
+                                         ("c", "pet", 1.9, 7)),
+                  episodes=(("a", "gap", 0.3, 9), ("a", "ttc", 1.0, 300), ("c", "pet", 1.9, 7)))
+    assert close_encounters(r) == [("a", 9), ("a", 300), ("c", 7)]
     # near (within 1.5 times a threshold, none under it): b's 3.1 s; a and c are close, d is too far off
     r = RiskScore(score=0.0, encounters=r.encounters + (("d", "pet", 3.5, 2), ("e", "gap", 2.0, 3)))
     assert close_encounters(r, near=True) == [("b", 4), ("e", 3)]
@@ -303,3 +306,73 @@ def test_a_walker_whose_line_runs_along_a_car_lane_is_not_placed(town_map):
     sx, sy, _ = town_map.geom("A0B0_0").position(80.0)
     on_sidewalk = across.model_copy(update={"dest_xy": (round(sx, 2), round(sy, 2))})
     assert walks_along_lane(mut, on_sidewalk) is None
+
+
+def test_a_place_ahead_on_a_bend_is_ahead_on_the_ego_s_path_not_beside_it():
+    """The roundabout's ring bends left. Where the ego will be 2.5 s on, on the ring, is well to the left of its
+    body axis now; read along the path it drives (:func:`along_path`, how a vehicle's place is read), it is ahead
+    in its lane, and a place a lane's width to the left of that is beside it. (Read in the body frame, every car
+    ahead on the ring was ``vehicle/left``: ``vehicle/ahead|roundabout`` was reached by no campaign.)"""
+    import math
+
+    from drivefuzz.sim.execute import execute
+    from drivefuzz.triage.coverage import along_path
+    from drivefuzz.triage.evidence import to_local
+
+    seed = read_scenario(ROOT / "seeds" / "roundabout" / "000")  # starts on the ring (ringEN), leaves by Wout
+    trace = execute(seed).trace
+    lanes = [str(x) for x in trace["lane"]]
+    k = next(i for i, lane in enumerate(lanes) if lane.startswith("ringEN") and trace["speed"][i] > 5.0)
+    later = k + int(round(2.5 / trace.step_length))
+    assert lanes[later].startswith(("ring", ":r"))  # on the ring, or its junctions
+    x, y = float(trace["x"][later]), float(trace["y"][later])
+    ahead = float(np.hypot(np.diff(trace["x"][k:later + 1]), np.diff(trace["y"][k:later + 1])).sum())
+    fwd, left = along_path(trace, k, x, y)
+    assert abs(fwd - ahead) < 0.5 and abs(left) < 0.3, (fwd, left, ahead)
+    assert to_local(trace, k, x, y)[1] > 1.8  # beside, in the body frame
+    h = float(trace["heading"][later])
+    fwd, left = along_path(trace, k, x - 3.5 * math.sin(h), y + 3.5 * math.cos(h))
+    assert abs(left - 3.5) < 0.3, left
+
+
+def test_an_actor_close_twice_is_two_encounters():
+    """Episodes: frames of one actor under a threshold with less than 3 s between them are one encounter, at the
+    most severe (value / threshold) of any component; 3 s or more apart, two. A PET is one event."""
+    import numpy as np
+
+    from drivefuzz.search.episodes import episodes
+
+    dt = 0.05
+    f = np.arange(0, 400)
+    ttc = np.full(400, 9.0)
+    ttc[100:140] = np.linspace(2.9, 2.0, 40)  # close 5.0-7.0 s
+    ttc[150:160] = 2.5  # 0.5 s later: the same episode
+    ttc[300:320] = 1.0  # 8 s later: another
+    gap = np.full(400, 5.0)
+    gap[130] = 0.3  # 0.3 / 1.5 = 0.2, more severe than TTC 2.0 / 3.0 in the first episode
+    got = episodes({"ttc": (np.zeros(400, int), f, ttc), "gap": (np.zeros(400, int), f, gap),
+                    "pet": (np.array([1]), np.array([50]), np.array([1.2]))}, ("a", "b"), dt)
+    assert got == (("a", "gap", 0.3, 130), ("a", "ttc", 1.0, 300), ("b", "pet", 1.2, 50))
+    assert episodes({"ttc": (np.zeros(3, int), np.arange(3), np.full(3, 3.0))}, ("a",), dt) == ()
+
+
+def test_a_follower_that_closes_in_as_the_ego_merges_and_again_at_its_stop_meets_it_twice():
+    """A tailgater on the highway comes up behind the ego as it merges (in its rear left quarter, TTC 2.5 s) and
+    runs up to it again as it stops at its goal 22 s later (TTC 2.3 s): two close encounters, two cells. Counted
+    once per actor, at its closest moment, the merge was never seen."""
+    from drivefuzz.scenario import Maneuver
+    from drivefuzz.search.risk import risk_score
+    from drivefuzz.sim.execute import execute
+
+    seed = read_scenario(ROOT / "seeds" / "highway" / "001")  # from the on-ramp to the off-ramp
+    rmap = load_roadmap(seed.network_path())
+    v0 = Actor(id="v0", kind="vehicle", nav="maneuver", start_lane="hw0_0", start_pos=158.75, speed=18.46,
+               depart=12.9, dest_edge="hw1-AddedOffRampEdge", maneuvers=(Maneuver(time=0.0, action="follow",
+                                                                                  value=0.78),))
+    sc = seed.model_copy(update={"actors": (v0,)})
+    trace = execute(sc).trace
+    frames = [f for a, f in close_encounters(risk_score(trace)) if a == "v0"]
+    assert len(frames) == 2 and frames[1] - frames[0] >= 3.0 / trace.step_length, frames
+    parties = [classify(sc, trace, rmap, "v0", f) for f in frames]
+    assert [(e.party, e.manoeuvre) for e in parties] == [("vehicle/rear_left", "lane_change"),
+                                                         ("vehicle/behind", "stop_go")]

@@ -50,13 +50,15 @@ from drivefuzz.search import programs as prog
 from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
 from drivefuzz.search.aim_place import (JUNCTION_COLUMNS, drawn_level, follower_at, into_lane, lane_change_moves,
-                                        meeting, passes, profile_spots, walker_from_left)
+                                        meeting, passes, profile_spots, stopped_past,
+                                        walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 
 #: [m] an actor this far before a junction (along the ego's route) meets the ego at it
 NEAR_JUNCTION_M = 50.0
 #: builders that time their actor to the aimed place themselves (no filter on where it starts)
-TIMED = ("passes", "drawn_level", "follower", "crossing", "oncoming", "grip", "into_lane", "walker_after")
+TIMED = ("passes", "drawn_level", "follower", "crossing", "oncoming", "grip", "into_lane", "walker_after",
+         "stopped_past")
 #: vehicle rows of a lane change that a car on the lane the ego changes into makes (:func:`into_lane`): where it is
 #: as the ego changes, and the side of the change it needs (None: either)
 INTO_LANE = {"vehicle/behind": ("behind", None), "vehicle/rear_left": ("rear", "left"),
@@ -262,6 +264,8 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
                               partial(_on_side, mut, sc, side))]
         return [_filtered(Situation("walker_crosses", "", partial(cat.walker_crosses, early=(-1.0, 1.5))),
                           partial(_on_side, mut, sc, side))]
+    if approach == "ahead" and col in ("turn_left", "turn_right") and at is not None:
+        return [Situation("stopped_past", "", partial(stopped_past, at=at))]
     if approach == "ahead":
         names = {"brake": ("lead_brakes", "brake_check", "lead_stopped"),
                  "stop_go": ("lead_stopped", "pulls_out", "lead_brakes"),
@@ -350,7 +354,9 @@ def _crossing(mut, sc, rng, want: str, col: str, at: float | None = None):
         # it heads to the ego's left (dh > 0): it comes from the ego's right
         return math.pi / 4 < abs(dh) < 3 * math.pi / 4 and (dh > 0) == (want == "crossing_right")
 
-    return cat.crossing_traffic(mut, sc, rng, keep=keep)
+    # where the ego enters on yellow, a lawful car on the cross road waits at its red: one that runs it meets the ego
+    # (at the ego's red the reference ADS waits, and enters at green: a red runner then met it at green)
+    return cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=col == "signal/amber")
 
 
 def _end_heading(edge) -> float:

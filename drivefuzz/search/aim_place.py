@@ -41,6 +41,8 @@ EDGE_CLEAR_M = 35.0
 ACCEL, BRAKE = 0.7, -1.0
 #: share of the followers built to close in, and [s] the time gaps they follow at (``follow`` steps)
 TAILGATE_SHARE, TAILGATE_S = 0.5, (MIN_FOLLOW_S, 0.9)
+#: [m/s^2] how hard a car that enters to stand (:func:`stopped_past`) stops: at once, just after it entered
+STAND_DECEL = 8.0
 JUNCTION_COLUMNS = ("signal/green", "signal/amber", "signal/red", "priority", "yield", "turn_left", "turn_right")
 
 
@@ -361,6 +363,30 @@ def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
     how = f", following at a time gap of {steps[0].value:.2f} s" if steps else ""
     return [a], [], {}, (f"{a.id} comes up behind the ego on {lane} at {speed:.1f} m/s, reaching it at "
                          f"~{t_meet:.1f} s{how}")
+
+
+def stopped_past(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
+    """A vehicle standing on the lane the ego turns into, 4-14 m past the place ``at`` (just out of the turn's
+    junction): the end of a queue, or a car waiting to turn off, that the ego sees as its heading comes round and
+    meets while it still turns. It drives on 2-6 s after the ego is expected there (an ADS that waits behind a
+    stopped car, as the reference ADS does, would otherwise stand there until the immobility oracle fires, one
+    more execution of that finding). (The catalogue's vehicles ahead start before the junction: the ego met them
+    there, going straight; 0 of 7 aimed builds for a car ahead in a left turn on town's seeds.)"""
+    past = rng.uniform(4.0, 14.0)  # farther, the ego had come out of the turn when it met it (braking, cruising)
+    spot = cat._route_spot(mut, sc, at + past)
+    turn = cat._route_spot(mut, sc, at)
+    if spot is None or turn is None or spot[0] != turn[0]:  # past the next junction: not the turn's exit
+        return None
+    i, _, pos = spot
+    lane = mut.ego_lane_at(sc, i, pos)  # the lane the turn leads into, before any lane change the route needs
+    speed = round(lane_limit(mut, lane) * rng.uniform(0.4, 0.7), 2)
+    roll = speed * speed / (2.0 * STAND_DECEL)  # it enters at its speed and stops at once
+    release = round(mut._ego_eta(sc, at + past) + rng.uniform(2.0, 6.0), 1)
+    steps = (Maneuver(time=0.0, action=ManeuverAction.SPEED, value=0.0, rate=STAND_DECEL),
+             Maneuver(time=release, action=ManeuverAction.SPEED, value=speed))
+    a = cat.Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=lane,
+                  start_pos=round(max(pos - roll, 1.0), 2), speed=speed, dest_edge=cat._dest(mut, sc), maneuvers=steps)
+    return [a], [], {}, (f"vehicle {a.id} standing on {lane} @ {pos:.1f} m, just past the turn, until {release} s")
 
 
 def walker_from_left(mut: Mutator, sc: Scenario, rng: random.Random, early=(-1.0, 1.5), at: float | None = None):

@@ -221,10 +221,13 @@ def walker_crosses(mut, sc, rng, early=(0.0, 4.0), at: float | None = None):
     return [a], [], {}, f"{a.id} crosses at {spot.lane} @ {spot.pos:.1f} m, leaving at {depart} s"
 
 
-def crossing_traffic(mut, sc, rng, keep=None):
+def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool = False):
     """A lawful vehicle on another approach to a junction of the ego's route, timed to reach the conflict
     point with the ego: whoever must yield has to (straight crossing paths, left turn across path). With
-    ``keep``, only the conflicts (``Mutator._conflicts``' tuples) it accepts (:mod:`drivefuzz.search.aim`)."""
+    ``keep``, only the conflicts (``Mutator._conflicts``' tuples) it accepts (:mod:`drivefuzz.search.aim`).
+    With ``runs_red``, a driver who ignores its light (and every other rule), reaching the conflict point
+    0.2-1.5 s after the ego: where the ego enters on yellow the cross stream's light is red, and a lawful car there
+    waits."""
     options = mut._conflicts(sc)
     if keep is not None:
         options = [o for o in options if keep(o)]
@@ -233,10 +236,10 @@ def crossing_traffic(mut, sc, rng, keep=None):
     # ego only as a car waiting there); where none can, such a car is all there is
     if not options:
         return None
-    free = [o for o in options
-            if not _light_stops(mut, sc, o[2], o[3], mut._ego_eta(sc, o[1]) - o[4] / (0.8 * lane_limit(mut, o[2])))]
+    free = [] if runs_red else [o for o in options if not _light_stops(
+        mut, sc, o[2], o[3], mut._ego_eta(sc, o[1]) - o[4] / (0.8 * lane_limit(mut, o[2])))]
     i, s_c, lane_id, dest, d_c, node, _, _ = rng.choice(free or options)
-    t_meet = mut._ego_eta(sc, s_c) + rng.uniform(-1.0, 1.5)
+    t_meet = mut._ego_eta(sc, s_c) + (rng.uniform(0.2, 1.5) if runs_red else rng.uniform(-1.0, 1.5))
     speed = round(lane_limit(mut, lane_id) * rng.uniform(0.6, 1.0), 2)
     lane_len = mut.rmap.lane(lane_id).getLength()
     back = speed * max(t_meet, 0.5) - d_c
@@ -247,9 +250,10 @@ def crossing_traffic(mut, sc, rng, keep=None):
     route = mut.rmap.route(mut.rmap.lane(lane).getEdge().getID(), dest)
     if not route:
         return None
-    a = Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.AUTOPILOT, start_lane=lane, start_pos=pos,
-              speed=speed, dest_edge=dest)
-    return [a], [], {}, f"{a.id} meets the ego at junction {node} at ~{t_meet:.1f} s ({speed:.1f} m/s)"
+    a = Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.LINEAR if runs_red else NavType.AUTOPILOT,
+              start_lane=lane, start_pos=pos, speed=speed, dest_edge=dest)
+    how = ", running its red" if runs_red else ""
+    return [a], [], {}, f"{a.id} meets the ego at junction {node} at ~{t_meet:.1f} s ({speed:.1f} m/s{how})"
 
 
 #: link states at which a lawful driver arriving at the stop line stops (red, red-yellow; at yellow it may go on)

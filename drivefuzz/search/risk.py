@@ -41,6 +41,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from drivefuzz.geometry import rect_distance
+from drivefuzz.search.episodes import GAP_M, episodes
 from drivefuzz.scenario.model import EGO_LENGTH, EGO_WIDTH
 
 __all__ = ["G", "COMPONENTS", "ACTOR_COMPONENTS", "RiskConfig", "RiskScore", "risk_score", "component_risks", "signals"]
@@ -131,12 +132,15 @@ class RiskScore:
     #: every actor's extreme TTC, PET and gap with its frame: ``(actor, component, value, frame)`` where finite;
     #: what interaction coverage (:mod:`drivefuzz.triage.coverage`) classifies. Not in :meth:`as_dict`.
     encounters: tuple[tuple[str, str, float, int], ...] = ()
+    #: every close encounter, one per episode of an actor's closeness (:mod:`drivefuzz.search.episodes`), in the
+    #: same form: what interaction coverage classifies. Not in :meth:`as_dict`.
+    episodes: tuple[tuple[str, str, float, int], ...] = ()
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-safe dict (plain floats, ints, strings and None), without :attr:`encounters`."""
+        """JSON-safe dict (plain floats, ints, strings and None), without :attr:`encounters` and :attr:`episodes`."""
         out: dict[str, Any] = {}
         for k, v in self.__dict__.items():
-            if k == "encounters":
+            if k in ("encounters", "episodes"):
                 continue
             if isinstance(v, dict):
                 out[k] = {str(a): _num(b) for a, b in v.items()}
@@ -524,12 +528,13 @@ class _Actors:
     gap_at: np.ndarray
 
 
-def _actor_components(trace, e, cfg: RiskConfig) -> tuple[_Actors | None, np.ndarray, np.ndarray]:
-    """TTC, DRAC, PET and gap per actor; per frame the least in-path TTC [s] and gap bound [m]."""
+def _actor_components(trace, e, cfg: RiskConfig) -> tuple[_Actors | None, np.ndarray, np.ndarray, tuple]:
+    """TTC, DRAC, PET and gap per actor; per frame the least in-path TTC [s] and gap bound [m]; the close
+    encounters' episodes (:func:`drivefuzz.search.episodes.episodes`)."""
     n = e["n"]
     rows = _rows(trace, e, cfg)
     if rows is None:
-        return None, np.full(n, np.inf), np.full(n, np.inf)
+        return None, np.full(n, np.inf), np.full(n, np.inf), ()
     n_act = len(trace.actors.ids)
     near = _take(rows, rows["near"])
     ttc, sep = _ttc(near, e, cfg)
@@ -543,7 +548,18 @@ def _actor_components(trace, e, cfg: RiskConfig) -> tuple[_Actors | None, np.nda
     ratio = np.where(close > 0.0, np.minimum(np.nan_to_num(ratio, nan=_DRAC_CAP), _DRAC_CAP), 0.0)
     out = _Actors(*_per_actor(tt, ji, fi, n_act), *_per_actor(ratio, ji, fi, n_act, largest=True),
                   *_pet(trace, e, cfg), *_gap(rows, near, sep, e, n_act))
-    return out, _per_frame_min(tt, fi, n), _per_frame_min(sep, near["f"], n)
+    return out, _per_frame_min(tt, fi, n), _per_frame_min(sep, near["f"], n), _episodes(near, sep, e, out, tt, ji, fi,
+                                                                                        trace)
+
+
+def _episodes(near, sep: np.ndarray, e, acts: _Actors, tt, ji, fi, trace) -> tuple:
+    """The close encounters' episodes from the in-path TTC rows, the exact gaps of the rows whose gap bound is
+    under :data:`~drivefuzz.search.episodes.GAP_M` (a row off ``near`` is farther: ``hazard_gap_m`` exceeds it),
+    and each actor's least PET (a crossing is one event)."""
+    cand = np.flatnonzero(sep < GAP_M)
+    pet = np.flatnonzero(np.isfinite(acts.pet) & (acts.pet_at >= 0))
+    return episodes({"ttc": (ji, fi, tt), "gap": (near["j"][cand], near["f"][cand], _distance(near, cand, e)),
+                     "pet": (pet, acts.pet_at[pet], acts.pet[pet])}, trace.actors.ids, trace.step_length)
 
 
 def _extremes(acts: _Actors | None, ids: tuple[str, ...]):
@@ -593,7 +609,7 @@ def signals(trace, config: RiskConfig | None = None) -> dict[str, np.ndarray]:
     ``grip`` friction use [-]; ``hazard`` the 'hazard near' mask that gates harsh manoeuvres."""
     cfg = config or RiskConfig()
     e = _ego(trace, cfg)
-    _, ttc_f, gap_f = _actor_components(trace, e, cfg)
+    _, ttc_f, gap_f, _ = _actor_components(trace, e, cfg)
     return {"t": e["t"], "ttc": ttc_f, "gap_lb": gap_f, "grip": np.hypot(e["ax"], e["ay"]) / (e["mu"] * cfg.g),
             "hazard": (ttc_f < cfg.hazard_ttc_s) | (gap_f < cfg.hazard_gap_m)}
 
@@ -612,7 +628,7 @@ def risk_score(trace, config: RiskConfig | None = None, baseline: RiskScore | No
         return RiskScore(score=0.0, risks=dict(zero), contributions=dict(zero))
     dt = trace.step_length
     e = _ego(trace, cfg)
-    acts, ttc_f, gap_f = _actor_components(trace, e, cfg)
+    acts, ttc_f, gap_f, close = _actor_components(trace, e, cfg)
     hazard = (ttc_f < cfg.hazard_ttc_s) | (gap_f < cfg.hazard_gap_m)
     ids = trace.actors.ids
     raw, frames, who = _extremes(acts, ids)
@@ -637,4 +653,5 @@ def risk_score(trace, config: RiskConfig | None = None, baseline: RiskScore | No
         risks=risks, contributions=contrib, actor_risk=actor_risk,
         riskiest_actor=riskiest, component=component, frame=frame,
         time=None if frame is None else float(e["t"][frame]), n_frames=n, encounters=_encounters(acts, ids),
+        episodes=close,
     )

@@ -283,6 +283,8 @@ class ActorDriver:
         elif m.action is ManeuverAction.FOLLOW:
             sim.vehicle.setTau(vid, max(m.value, self.dt))  # a user's file may ask for 0: SUMO wants a step at least
             sim.vehicle.setMinGap(vid, FOLLOW_GAP)
+            if m.rate > 0.0:  # it brakes that hard for the vehicle ahead, and no sooner than it must
+                sim.vehicle.setDecel(vid, m.rate)
         else:
             lane = sim.vehicle.getLaneID(vid)
             if not lane or lane.startswith(":"):
