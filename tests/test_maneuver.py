@@ -293,3 +293,36 @@ def test_a_follow_step_closes_the_gap_to_the_time_gap_it_asks_for():
     assert "under the" in unfair(mut, sc, npc(*ahead, Maneuver(time=0.0, action="follow", value=0.3)))
     assert "only the clock" in unfair(mut, sc, npc(*ahead, Maneuver(time=0.0, action="follow", value=0.6,
                                                                     trigger=Trigger.GAP, at=-10.0)))
+
+
+def _least_ttc(ex) -> float:
+    """[s] the least time to collision of the follower v0 with the ego (its front to the ego's rear, closing)."""
+    t, x, _, v = track(ex)
+    frames = ex.trace.actors.frame[ex.trace.actors.actor == ex.trace.actors.ids.index("v0")]
+    ego_x = np.asarray(ex.trace.ego["x"])[frames]
+    ego_v = np.asarray(ex.trace.ego["speed"])[frames]
+    gap = ego_x - 0.5 * float(ex.trace.meta.get("ego_length", 4.6)) - (x + 0.5 * 4.6)
+    closing = v - ego_v
+    return float(np.min(np.where(closing > 0.1, gap / np.maximum(closing, 0.1), np.inf)))
+
+
+def test_a_close_step_drives_up_to_its_time_to_collision_before_it_brakes():
+    """SUMO's follower brakes early (the least time to collision of a car closing in from behind is over 3 s, no
+    close encounter); a close step keeps its speed until the time to collision is the step's (2 s) and then
+    brakes as SUMO does: no collision. Fairness refuses one under MIN_CLOSE_TTC or timed against the ego."""
+    from drivefuzz.scenario.model import MIN_CLOSE_TTC
+
+    runs = {}
+    for name, steps in (("plain", ()), ("close", (Maneuver(time=0.0, action="follow", value=0.6),
+                                                  Maneuver(time=0.0, action="close", value=0.0, at=2.0)))):
+        ex = execute(highway(npc("hw0_1", 1.0, 28.0, *steps), time_limit=25.0), stop_on_misbehavior=False)
+        assert not [m for m in ex.misbehaviors if m.oracle == "collision"], name
+        runs[name] = _least_ttc(ex)
+    assert runs["plain"] > 3.0 and 1.9 < runs["close"] < 2.2, runs
+    mut = Mutator(load_roadmap(NET))
+    sc = highway()
+    ahead = ("hw0_0", 120.0, 20.0)
+    assert unfair(mut, sc, npc(*ahead, Maneuver(time=0.0, action="close", value=0.0, at=MIN_CLOSE_TTC))) is None
+    assert "under" in unfair(mut, sc, npc(*ahead, Maneuver(time=0.0, action="close", value=0.0, at=1.0)))
+    assert "only the clock" in unfair(mut, sc, npc(*ahead, Maneuver(time=0.0, action="close", value=0.0, at=2.0,
+                                                                    trigger=Trigger.HEADWAY)))

@@ -68,6 +68,10 @@ class ManeuverAction(str, Enum):
     #: from now on, follow the vehicle ahead at a time gap of ``value`` [s] (SUMO's tau; its vType's is 1 s) and
     #: :data:`FOLLOW_GAP` m at a standstill: a close follower, as many drivers are (clock triggers only)
     FOLLOW = "follow"
+    #: from now on, drive at the actor's speed without braking for the vehicle ahead until the time to collision
+    #: with it is ``at`` [s] (at least :data:`MIN_CLOSE_TTC`), then brake as SUMO's car-following (and a follow
+    #: step before it) does: a driver who closes in fast and brakes late (clock triggers only)
+    CLOSE = "close"
 
 
 class Trigger(str, Enum):
@@ -94,6 +98,9 @@ MAX_NUDGE = 2.5
 MIN_FOLLOW_S = 0.5
 #: ... and [m] the gap it keeps at a standstill (SUMO's minGap; its vType's is 2.5 m)
 FOLLOW_GAP = 1.0
+#: [s] the least time to collision at which a ``close`` step brakes: it then sheds its closing speed ``c`` at
+#: ``c / (2 * 1.5 s)`` (2.7 m/s^2 at 8 m/s), well within a car's braking
+MIN_CLOSE_TTC = 1.5
 #: A careful driver's reaction [s] and firm braking [m/s^2] on a dry road, and the room [m] left over when it
 #: has braked for a vehicle that cut in: the yardstick of every fairness rule (search/fairness.py).
 CAREFUL_REACTION, CAREFUL_DECEL, CUT_IN_MARGIN = 0.75, 5.0, 5.0

@@ -28,7 +28,7 @@ import random
 import numpy as np
 
 from drivefuzz.scenario import ActorKind, Maneuver, ManeuverAction, NavType, Scenario, SignalShift, Trigger
-from drivefuzz.scenario.model import EGO_LENGTH, EGO_WIDTH, MIN_FOLLOW_S, NPC_WIDTH, drift_room
+from drivefuzz.scenario.model import EGO_LENGTH, EGO_WIDTH, MIN_CLOSE_TTC, MIN_FOLLOW_S, NPC_WIDTH, drift_room
 from drivefuzz.scenario.signals import phase_starts, shiftable
 from drivefuzz.search import catalogue as cat
 from drivefuzz.search import programs as prog
@@ -41,6 +41,11 @@ EDGE_CLEAR_M = 35.0
 ACCEL, BRAKE = 0.7, -1.0
 #: share of the followers built to close in, and [s] the time gaps they follow at (``follow`` steps)
 TAILGATE_SHARE, TAILGATE_S = 0.5, (MIN_FOLLOW_S, 0.9)
+#: [s] the time to collision at which a close-in follower brakes (a close step, ``MIN_CLOSE_TTC`` at least)
+CLOSE_TTC = (MIN_CLOSE_TTC, 2.5)
+#: [m] a cruise or acceleration aimed at keeps this far from a ring or ramp edge (on one it counts as the
+#: roundabout or merge column: a car behind the ego cruising the roundabout's ring was ``behind|roundabout``)
+RING_MARGIN_M = 10.0
 #: [m/s^2] how hard a car that enters to stand (:func:`stopped_past`) stops: at once, just after it entered
 STAND_DECEL = 8.0
 JUNCTION_COLUMNS = ("signal/green", "signal/amber", "signal/red", "priority", "yield", "turn_left", "turn_right")
@@ -71,6 +76,9 @@ def meeting(mut: Mutator, sc: Scenario, col: str, rng: random.Random) -> tuple[S
     if col not in ("stop_go", "accelerate", "brake", "cruise"):
         return sc, None, ""
     spots = profile_spots(mut, sc, col)
+    if col in ("accelerate", "cruise"):  # on a ring or a ramp these are the roundabout and merge columns instead
+        special = marks["rings"] + marks["ramps"]
+        spots = [d for d in spots if not any(s0 - RING_MARGIN_M <= d <= s1 + RING_MARGIN_M for s0, s1 in special)]
     if col == "stop_go" and not spots:  # nowhere to stand: a light of the route turns red as the ego comes
         lights = [s for s, _, c, _, _ in marks["junctions"] if c == "signal"]
         if lights:
@@ -330,9 +338,10 @@ def drawn_level(mut: Mutator, sc: Scenario, rng: random.Random, at: float | None
 
 def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
     """A vehicle on the ego's lane behind the place ``at`` that reaches the ego's rear as the ego gets there: where
-    the ego is expected to stand there (a red light, say), a lawful car arriving 0.5-4 s after it; where it is
-    expected to move, a car 3-6 m/s faster (at most 1.2 x the limit: a maneuver vehicle without steps, which
-    SUMO drives at that speed behind the ego and brakes as it closes in). Either closes in from behind."""
+    the ego is expected to stand there (a red light, say), a lawful car arriving 0.5-4 s after it, half of them
+    following close (a follow step); where it is expected to move, a car 3-6 m/s faster (at most 1.2 x the limit)
+    that follows close and closes in without braking until its time to collision is 1.5-2.5 s (a close step).
+    Either closes in from behind."""
     spot = cat._route_spot(mut, sc, max(at - 0.5, 0.0))
     if spot is None:
         return None
@@ -354,13 +363,19 @@ def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
         return None
     start_lane, start, depart = placed
     # SUMO's follower keeps a time gap of 1 s and closes in at a time to collision of about 3.7 s, no close
-    # encounter; many drivers follow closer (a maneuver step: TAILGATE_S)
-    close = rng.random() < TAILGATE_SHARE
-    steps = (Maneuver(time=0.0, action=ManeuverAction.FOLLOW, value=round(rng.uniform(*TAILGATE_S), 2)),) if close \
-        else ()
+    # encounter; many drivers follow closer (a maneuver step: TAILGATE_S), and where the ego moves, close in fast
+    # and brake late (a close step: CLOSE_TTC; with the follow step alone, 0 of 8 aimed builds for a car behind
+    # the cruising ego on the highway's seeds met it, all of them at its stop at the goal instead)
+    steps: tuple[Maneuver, ...] = ()
+    how = ""
+    if v_ego >= 1.0 or rng.random() < TAILGATE_SHARE:
+        steps = (Maneuver(time=0.0, action=ManeuverAction.FOLLOW, value=round(rng.uniform(*TAILGATE_S), 2)),)
+        how = f", following at a time gap of {steps[0].value:.2f} s"
+    if v_ego >= 1.0:
+        steps += (Maneuver(time=0.0, action=ManeuverAction.CLOSE, value=0.0, at=round(rng.uniform(*CLOSE_TTC), 2)),)
+        how += f" and braking at a time to collision of {steps[1].at:.2f} s"
     a = cat.Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=nav, start_lane=start_lane, start_pos=start,
                   speed=speed, depart=depart, dest_edge=cat._dest(mut, sc), maneuvers=steps)
-    how = f", following at a time gap of {steps[0].value:.2f} s" if steps else ""
     return [a], [], {}, (f"{a.id} comes up behind the ego on {lane} at {speed:.1f} m/s, reaching it at "
                          f"~{t_meet:.1f} s{how}")
 

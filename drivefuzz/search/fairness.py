@@ -53,7 +53,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from drivefuzz.scenario import Actor, ActorKind, ManeuverAction, NavType, Scenario, Trigger
-from drivefuzz.scenario.model import CAREFUL_DECEL, CAREFUL_REACTION, EGO_LENGTH, MIN_FOLLOW_S, cut_in_gap, in_lane
+from drivefuzz.scenario.model import (CAREFUL_DECEL, CAREFUL_REACTION, EGO_LENGTH, MIN_CLOSE_TTC, MIN_FOLLOW_S,
+                                      cut_in_gap, in_lane)
 from drivefuzz.scenario.roadmap import PASSENGER
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -228,6 +229,12 @@ def _program_unfair(mut: "Mutator", actor: Actor) -> str | None:
                 return f"step {k} (follow) is timed against the ego: only the clock may start it"
             if m.value < MIN_FOLLOW_S:
                 return f"step {k} follows at a time gap of {m.value:.2f} s, under the {MIN_FOLLOW_S} s drivers keep"
+            continue
+        if m.action is ManeuverAction.CLOSE:  # it brakes at a time to collision it can still stop from
+            if m.trigger not in (Trigger.TIME, Trigger.AFTER):
+                return f"step {k} (close) is timed against the ego: only the clock may start it"
+            if m.at < MIN_CLOSE_TTC:
+                return f"step {k} brakes at a time to collision of {m.at:.2f} s, under {MIN_CLOSE_TTC} s"
             continue
         if m.trigger is Trigger.AFTER:
             return f"step {k} ({m.action.value}) is timed by the step before, not by the gap to the ego"

@@ -42,7 +42,7 @@ from pydantic import BaseModel, ConfigDict, Field
 from drivefuzz.scenario.roadmap import PASSENGER, PEDESTRIAN, RoadMap
 from drivefuzz.search.fairness import lane_limit, unfair
 from drivefuzz.search.placement import RoutePlacement
-from drivefuzz.scenario.model import MAX_NUDGE, MIN_FOLLOW_S
+from drivefuzz.scenario.model import MAX_NUDGE, MIN_CLOSE_TTC, MIN_FOLLOW_S
 from drivefuzz.scenario import (
     Actor,
     ActorKind,
@@ -515,6 +515,8 @@ class Mutator(RoutePlacement):
         if m.action is ManeuverAction.FOLLOW:
             gap = min(max(m.value * rng.uniform(0.6, 1.4), MIN_FOLLOW_S), 2.0)  # [s] time gap
             return m.model_copy(update={"value": round(gap, 2)})
+        if m.action is ManeuverAction.CLOSE:  # [s] the time to collision at which it brakes
+            return m.model_copy(update={"at": round(min(max(m.at * rng.uniform(0.7, 1.3), MIN_CLOSE_TTC), 3.0), 2)})
         if m.depth > 0.0 and rng.random() < 0.5:
             return m.model_copy(update={"depth": round(min(max(m.depth * rng.uniform(0.6, 1.4), 0.3), MAX_NUDGE), 2)})
         return m.model_copy(update={"value": round(min(max(m.value * rng.uniform(0.6, 1.4), 1.0), 5.0), 2)})

@@ -16,7 +16,7 @@ import numpy as np
 from drivefuzz.ads import OBSERVATION_RADIUS, ObjectState
 from drivefuzz.oracle import Obstacle
 from drivefuzz.scenario import ActorKind, Maneuver, ManeuverAction, NavType, Scenario, Trigger
-from drivefuzz.scenario.model import CAREFUL_DECEL, CAREFUL_REACTION, FOLLOW_GAP, cut_in_gap, in_lane
+from drivefuzz.scenario.model import CAREFUL_DECEL, CAREFUL_REACTION, FOLLOW_GAP, MIN_CLOSE_TTC, cut_in_gap, in_lane
 from drivefuzz.sim.trace import Recorder
 
 #: POI/polygon types the collision oracle treats as solid (a user's polygon file may use them).
@@ -63,6 +63,11 @@ TRIGGER_LATERAL = 10.0
 POP_UP_LATERAL, POP_UP_MARGIN = 2.5, 2.0
 #: [m/s^2] SUMO's default deceleration and acceleration of a passenger car (a program may ask for more)
 SUMO_DECEL, SUMO_ACCEL = 4.5, 2.6
+#: SUMO's speed modes: its default (every check on), and a close step's (the safe speed to the leader off; the
+#: limits of acceleration and braking, right of way and red lights kept)
+SUMO_SPEED_MODE, CLOSE_SPEED_MODE = 31, 30
+#: [m] how far ahead a close step looks for its leader, and [m] the gap at which it brakes whatever its TTC
+CLOSE_LOOK, CLOSE_GAP = 150.0, 3.0
 
 
 def _room_to_shed(shed: float) -> float:
@@ -80,6 +85,7 @@ class _Program:
     armed: bool = False  # the gap or headway has reached the next step's ``at`` (it fires when it may)
     ramp: tuple[float, float] | None = None  # (target speed [m/s], rate [m/s^2]) of a speed step under way
     nudge: tuple[float, float, float] | None = None  # (start [s], duration [s], signed depth [m], left > 0)
+    close: float | None = None  # [s] a close step under way: the time to collision at which it brakes
 
 
 class ActorDriver:
@@ -212,6 +218,8 @@ class ActorDriver:
                     self._ramp(vid, p)
                 if p.nudge is not None:
                     self._nudge(vid, p, t)
+                if p.close is not None:
+                    self._close(vid, p)
         if self.walkers:
             alive = set(alive_persons)
             for pid, w in list(self.walkers.items()):
@@ -283,8 +291,10 @@ class ActorDriver:
         elif m.action is ManeuverAction.FOLLOW:
             sim.vehicle.setTau(vid, max(m.value, self.dt))  # a user's file may ask for 0: SUMO wants a step at least
             sim.vehicle.setMinGap(vid, FOLLOW_GAP)
-            if m.rate > 0.0:  # it brakes that hard for the vehicle ahead, and no sooner than it must
-                sim.vehicle.setDecel(vid, m.rate)
+        elif m.action is ManeuverAction.CLOSE:
+            p.close = max(m.at, MIN_CLOSE_TTC)
+            sim.vehicle.setSpeedMode(vid, CLOSE_SPEED_MODE)  # SUMO's safe speed off: it does not brake for the leader
+            sim.vehicle.setSpeed(vid, self.spec[vid].speed)
         else:
             lane = sim.vehicle.getLaneID(vid)
             if not lane or lane.startswith(":"):
@@ -306,6 +316,19 @@ class ActorDriver:
         self.sim.vehicle.setSpeed(vid, v)
         if v == target:
             p.ramp = None
+
+    def _close(self, vid: str, p: _Program) -> None:
+        """One step of a close step: once the time to collision with the vehicle ahead (whoever it is) is
+        ``p.close`` or less, or its gap under :data:`CLOSE_GAP`, SUMO's car-following takes over again and brakes."""
+        sim = self.sim
+        leader = sim.vehicle.getLeader(vid, CLOSE_LOOK)
+        if leader is not None and leader[0]:
+            gap = leader[1] + sim.vehicle.getMinGap(vid)  # SUMO's leader gap leaves out the minGap
+            closing = sim.vehicle.getSpeed(vid) - sim.vehicle.getSpeed(leader[0])
+            if gap < CLOSE_GAP or (closing > 0.0 and gap / closing <= p.close):
+                sim.vehicle.setSpeedMode(vid, SUMO_SPEED_MODE)
+                sim.vehicle.setSpeed(vid, -1.0)  # back to its car-following (and the time gap of a follow step)
+                p.close = None
 
     def _nudge(self, vid: str, p: _Program, t: float) -> None:
         t0, duration, depth = p.nudge
