@@ -20,6 +20,21 @@ from drivefuzz.sim.execute import execute
 from drivefuzz.triage.coverage import classify, close_encounters
 
 
+def run(sc):
+    """A run of ``sc`` as a campaign runs it: the built-in oracles on, stopped at the first misbehaviour (without
+    oracles ``misbehaviors`` is always empty, and a check on it cannot fail)."""
+    from drivefuzz.oracle import OracleSettings
+
+    return execute(sc, oracles=OracleSettings().instantiate())
+
+
+def ego_fault(sc, ex, rmap) -> bool:
+    """Whether every collision of ``ex`` is the ego's fault (the attribution's rules and replay)."""
+    from drivefuzz.triage.attribute import attribute
+
+    return all(attribute(sc, ex.trace, m, rmap).fault == "ego" for m in ex.misbehaviors if m.oracle == "collision")
+
+
 @pytest.fixture(scope="module")
 def mut(town_seeds):
     return Mutator(load_roadmap(town_seeds[0].network_path()))
@@ -155,13 +170,13 @@ def _side_encounters(mut, seeds, build, rows):
             continue
         built += 1
         new = sc.model_copy(update={"actors": sc.actors + tuple(b[0])})
-        ex = execute(new)
+        ex = run(new)
         r = risk_score(ex.trace)
         mine = [(c, v, classify(new, ex.trace, mut.rmap, a, f).party) for a, c, v, f in r.episodes if a == b[0][0].id]
         if any(p in rows for _, _, p in mine):
             met += 1
             gaps += [v for c, v, p in mine if c == "gap" and p in rows]  # the least gap of each such encounter
-        crashes += any(m.oracle == "collision" for m in ex.misbehaviors)
+        crashes += not ego_fault(new, ex, mut.rmap)  # a collision the ego was not at fault for
     return built, met, gaps, crashes
 
 
@@ -245,7 +260,7 @@ def test_a_close_follower_meets_the_ego_from_behind_where_a_plain_one_does_not(m
                 continue
             a = b[0][0].model_copy(update={"maneuvers": ()}) if plain else b[0][0]
             new = new.model_copy(update={"actors": new.actors + (a,)})
-            ex = execute(new)
+            ex = run(new)
             r = risk_score(ex.trace)
             met += any((e.party, e.element) == ("vehicle/behind", "signal/red")  # at the light, not later on
                        for e in (classify(new, ex.trace, mut.rmap, x, f) for x, f in close_encounters(r) if x == a.id))
@@ -347,9 +362,9 @@ def test_a_car_on_the_lane_the_ego_changes_into_meets_it_in_its_lane_change(mut,
     the lane it entered by until it changes (before, the rear car was a follower on the ego's lane too close to
     stop, and the level car entered the simulation inside the ego's body)."""
     from drivefuzz.search.aim_place import into_lane, lane_change_moves
-    from drivefuzz.triage.attribute import attribute
 
     hits = {"rear": 0, "level": 0}
+    crashes = 0
     for si in (0, 2, 6):
         sc = town_seeds[si]
         (move,) = lane_change_moves(mut, sc)
@@ -359,14 +374,14 @@ def test_a_car_on_the_lane_the_ego_changes_into_meets_it_in_its_lane_change(mut,
             assert built is not None
             new = sc.model_copy(update={"actors": sc.actors + tuple(built[0])})
             assert unfair(mut, new, built[0][0]) is None, where
-            ex = execute(new)
+            ex = run(new)
             r = risk_score(ex.trace)
             cells = {f"{e.party}|{e.manoeuvre}" for e in (classify(new, ex.trace, mut.rmap, a, f)
                                                            for a, f in close_encounters(r) if a == built[0][0].id)}
             hits[where] += want in cells
-            for m in ex.misbehaviors:
-                if m.oracle == "collision":
-                    assert attribute(new, ex.trace, m, mut.rmap).fault == "ego", (si, where, m)
+            crashes += any(m.oracle == "collision" for m in ex.misbehaviors)
+            assert ego_fault(new, ex, mut.rmap), (si, where, ex.misbehaviors)
+    assert crashes >= 1  # the reference ADS strikes some of them
     assert hits["rear"] >= 2 and hits["level"] >= 2, hits
 
 
@@ -412,8 +427,9 @@ def test_a_car_standing_just_past_a_turn_meets_the_ego_ahead_while_it_turns(mut,
             new = sc.model_copy(update={"actors": sc.actors + tuple(b[0])})
             assert unfair(mut, new, b[0][0]) is None
             built += 1
-            ex = execute(new)
-            assert not ex.misbehaviors, (k, col, ex.misbehaviors)
+            ex = run(new)
+            assert not [m for m in ex.misbehaviors if m.oracle == "immobility"], (k, col)
+            assert ego_fault(new, ex, mut.rmap), (k, col, ex.misbehaviors)
             r = risk_score(ex.trace)
             met += any(f"{e.party}|{e.manoeuvre}" == f"vehicle/ahead|{col}"
                        for e in (classify(new, ex.trace, mut.rmap, a, f) for a, f in close_encounters(r)))
