@@ -310,12 +310,14 @@ def test_a_close_step_drives_up_to_its_time_to_collision_before_it_brakes():
     """SUMO's follower brakes early (the least time to collision of a car closing in from behind is over 3 s, no
     close encounter); a close step keeps its speed until the time to collision is the step's (2 s) and then
     brakes as SUMO does: no collision. Fairness refuses one under MIN_CLOSE_TTC or timed against the ego."""
+    from drivefuzz.oracle import OracleSettings
     from drivefuzz.scenario.model import MIN_CLOSE_TTC
 
     runs = {}
     for name, steps in (("plain", ()), ("close", (Maneuver(time=0.0, action="follow", value=0.6),
                                                   Maneuver(time=0.0, action="close", value=0.0, at=2.0)))):
-        ex = execute(highway(npc("hw0_1", 1.0, 28.0, *steps), time_limit=25.0), stop_on_misbehavior=False)
+        ex = execute(highway(npc("hw0_1", 1.0, 28.0, *steps), time_limit=25.0),
+                     oracles=OracleSettings().instantiate(), stop_on_misbehavior=False)
         assert not [m for m in ex.misbehaviors if m.oracle == "collision"], name
         runs[name] = _least_ttc(ex)
     assert runs["plain"] > 3.0 and 1.9 < runs["close"] < 2.2, runs
