@@ -50,8 +50,7 @@ from drivefuzz.search import programs as prog
 from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
 from drivefuzz.search.aim_place import (JUNCTION_COLUMNS, drawn_level, follower_at, into_lane, lane_change_moves,
-                                        meeting, passes, profile_spots, stopped_past,
-                                        walker_from_left)
+                                        meeting, passes, profile_spots, stopped_past, walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 
 #: [m] an actor this far before a junction (along the ego's route) meets the ego at it

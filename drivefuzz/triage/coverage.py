@@ -1,9 +1,10 @@
 """Interaction coverage: which kinds of close encounter a campaign has created, and which it could create.
 
-Every execution's trace is read for its *close encounters*: per actor, an in-path time-to-collision
-under :data:`TTC_S`, a post-encroachment time under :data:`PET_S` or a body gap under :data:`GAP_M`
-(the per-actor extremes that :func:`drivefuzz.search.risk.risk_score` computes anyway), and tyre grip
-use over :data:`GRIP` (an encounter with no other party). Each encounter is classified at its frame
+Every execution's trace is read for its *close encounters*: per actor and episode of closeness
+(:mod:`drivefuzz.search.episodes`), an in-path time-to-collision under :data:`TTC_S`, a post-encroachment
+time under :data:`PET_S` or a body gap under :data:`GAP_M` (from the rows that
+:func:`drivefuzz.search.risk.risk_score` computes anyway), and tyre grip use over :data:`GRIP` (an encounter
+with no other party). Each encounter is classified at its frame
 (:func:`classify`) along six axes:
 
 - ``party``: ``vehicle/<approach>`` with approach ``ahead behind left right rear_left rear_right oncoming
