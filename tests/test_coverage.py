@@ -338,8 +338,6 @@ def test_a_place_ahead_on_a_bend_is_ahead_on_the_ego_s_path_not_beside_it():
 def test_an_actor_close_twice_is_two_encounters():
     """Episodes: frames of one actor under a threshold with less than 3 s between them are one encounter, at the
     most severe (value / threshold) of any component; 3 s or more apart, two. A PET is one event."""
-    import numpy as np
-
     from drivefuzz.search.episodes import episodes
 
     dt = 0.05
