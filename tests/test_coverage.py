@@ -316,8 +316,7 @@ def test_a_place_ahead_on_a_bend_is_ahead_on_the_ego_s_path_not_beside_it():
     import math
 
     from drivefuzz.sim.execute import execute
-    from drivefuzz.triage.coverage import along_path
-    from drivefuzz.triage.evidence import to_local
+    from drivefuzz.triage.evidence import along_path, to_local
 
     seed = read_scenario(ROOT / "seeds" / "roundabout" / "000")  # starts on the ring (ringEN), leaves by Wout
     trace = execute(seed).trace

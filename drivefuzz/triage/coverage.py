@@ -44,7 +44,8 @@ import numpy as np
 
 from drivefuzz.search.episodes import GAP_M, PET_S, TTC_S  # the thresholds of a close encounter
 from drivefuzz.sim.world import sun_glare
-from drivefuzz.triage.evidence import actor_track, frames_before, lane_changed, lateral_shift, to_local, wrap_angle
+from drivefuzz.triage.evidence import (actor_track, along_path, frames_before, lane_changed, lateral_shift, to_local,
+                                       wrap_angle)
 from drivefuzz.triage.signature import element as signature_element
 
 GRIP = 0.85  #: [-] tyre friction use at or over this is an encounter with no other party
@@ -52,8 +53,6 @@ WINDOW_S = 3.0  #: [s] before the encounter over which the ego's manoeuvre is re
 APPROACH_S = 2.0  #: [s] before the encounter at which the other party's approach is read
 TURN = math.radians(30.0)  #: [rad] heading change that makes a turn
 SAME_LANE_M = 1.8  #: [m] lateral offset within which a same-direction vehicle is ahead / behind
-PATH_S = 10.0  #: [s] of the ego's path, before and after the moment, along which a vehicle's place is read
-PATH_RUN_M = 50.0  #: [m] the path runs on straight beyond its ends
 LANE_SHIFT_M = 1.0  #: [m] sideways on one edge over the window that makes a lane change (one under way counts)
 #: (upper bound [m/s], name) of the ego's speed bands
 SPEED_BANDS: tuple[tuple[float, str], ...] = ((2.8, "0-10 km/h"), (8.3, "10-30 km/h"), (16.7, "30-60 km/h"),
@@ -179,45 +178,6 @@ def party(trace, actor: str | None, f: int) -> str:
         return "vehicle/ahead" if lx > 0 else "vehicle/behind"
     half = 0.5 * float(trace.meta.get("ego_length") or 4.6)
     return f"vehicle/rear_{side}" if lx < -half else f"vehicle/{side}"
-
-
-def along_path(trace, k: int, x: float, y: float) -> tuple[float, float]:
-    """(forward, left) [m] of (x, y) from the ego at frame ``k``, along the path it drives from
-    :data:`PATH_S` s before ``k`` to as long after (straight on beyond either end) and off it. In the body frame,
-    a car ahead in the ego's lane on a bend, or on the lane its turn leads into, is beside it (a roundabout's ring
-    turns left: the car ahead on it read as ``vehicle/left``); on the path it is ahead."""
-    span = int(round(PATH_S / trace.step_length))
-    lo, hi = max(k - span, 0), min(k + span, trace.n_frames - 1)
-    px = np.asarray(trace["x"][lo:hi + 1], dtype=float)
-    py = np.asarray(trace["y"][lo:hi + 1], dtype=float)
-    ok = np.isfinite(px) & np.isfinite(py)
-    if ok.sum() < 2:
-        return to_local(trace, k, x, y)
-    idx = np.flatnonzero(ok)
-    px, py = px[idx], py[idx]
-    keep = np.concatenate(([True], np.hypot(np.diff(px), np.diff(py)) > 0.05))  # standing still: one point
-    px, py, idx = px[keep], py[keep], idx[keep]
-    ego = int(np.searchsorted(idx, k - lo, side="right")) - 1  # the path point the ego is at (or last passed)
-    h0, h1 = float(trace["heading"][lo + idx[0]]), float(trace["heading"][lo + idx[-1]])
-    px = np.concatenate(([px[0] - PATH_RUN_M * math.cos(h0)], px, [px[-1] + PATH_RUN_M * math.cos(h1)]))
-    py = np.concatenate(([py[0] - PATH_RUN_M * math.sin(h0)], py, [py[-1] + PATH_RUN_M * math.sin(h1)]))
-    ego += 1
-    ax, ay, bx, by = px[:-1], py[:-1], px[1:], py[1:]
-    dx, dy = bx - ax, by - ay
-    seg = np.hypot(dx, dy)
-    u = np.clip(((x - ax) * dx + (y - ay) * dy) / np.maximum(seg * seg, 1e-12), 0.0, 1.0)
-    d = np.hypot(ax + u * dx - x, ay + u * dy - y)
-    i = int(np.argmin(d))
-    s = np.concatenate(([0.0], np.cumsum(seg)))
-    ex, ey = float(trace["x"][k]), float(trace["y"][k])
-    if math.isfinite(ex + ey):  # the ego's own place on the path: its point, or between it and the next
-        j = max(min(ego, len(seg) - 1), 0)
-        ue = float(np.clip(((ex - ax[j]) * dx[j] + (ey - ay[j]) * dy[j]) / max(seg[j] ** 2, 1e-12), 0.0, 1.0))
-        s_ego = s[j] + ue * seg[j]
-    else:
-        s_ego = s[ego]
-    cross = dx[i] * (y - ay[i]) - dy[i] * (x - ax[i])
-    return float(s[i] + u[i] * seg[i] - s_ego), float(math.copysign(d[i], cross) if d[i] > 0 else 0.0)
 
 
 def manoeuvre(trace, f: int, elem: str, rmap=None) -> str:

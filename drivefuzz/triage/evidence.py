@@ -77,6 +77,51 @@ def to_local(trace, f: int, x: float, y: float) -> tuple[float, float]:
     return dx * c + dy * s, -dx * s + dy * c
 
 
+#: [s] of the ego's path, before and after the moment, along which :func:`along_path` reads a place
+PATH_S = 10.0
+#: [m] the path runs on straight beyond its ends
+PATH_RUN_M = 50.0
+
+
+def along_path(trace, k: int, x: float, y: float) -> tuple[float, float]:
+    """(forward, left) [m] of (x, y) from the ego at frame ``k``, along the path it drives from
+    :data:`PATH_S` s before ``k`` to as long after (straight on beyond either end) and off it. In the body frame,
+    a car ahead in the ego's lane on a bend, or on the lane its turn leads into, is beside it (a roundabout's ring
+    turns left: the car ahead on it read as ``vehicle/left``); on the path it is ahead."""
+    span = int(round(PATH_S / trace.step_length))
+    lo, hi = max(k - span, 0), min(k + span, trace.n_frames - 1)
+    px = np.asarray(trace["x"][lo:hi + 1], dtype=float)
+    py = np.asarray(trace["y"][lo:hi + 1], dtype=float)
+    ok = np.isfinite(px) & np.isfinite(py)
+    if ok.sum() < 2:
+        return to_local(trace, k, x, y)
+    idx = np.flatnonzero(ok)
+    px, py = px[idx], py[idx]
+    keep = np.concatenate(([True], np.hypot(np.diff(px), np.diff(py)) > 0.05))  # standing still: one point
+    px, py, idx = px[keep], py[keep], idx[keep]
+    ego = int(np.searchsorted(idx, k - lo, side="right")) - 1  # the path point the ego is at (or last passed)
+    h0, h1 = float(trace["heading"][lo + idx[0]]), float(trace["heading"][lo + idx[-1]])
+    px = np.concatenate(([px[0] - PATH_RUN_M * math.cos(h0)], px, [px[-1] + PATH_RUN_M * math.cos(h1)]))
+    py = np.concatenate(([py[0] - PATH_RUN_M * math.sin(h0)], py, [py[-1] + PATH_RUN_M * math.sin(h1)]))
+    ego += 1
+    ax, ay, bx, by = px[:-1], py[:-1], px[1:], py[1:]
+    dx, dy = bx - ax, by - ay
+    seg = np.hypot(dx, dy)
+    u = np.clip(((x - ax) * dx + (y - ay) * dy) / np.maximum(seg * seg, 1e-12), 0.0, 1.0)
+    d = np.hypot(ax + u * dx - x, ay + u * dy - y)
+    i = int(np.argmin(d))
+    s = np.concatenate(([0.0], np.cumsum(seg)))
+    ex, ey = float(trace["x"][k]), float(trace["y"][k])
+    if math.isfinite(ex + ey):  # the ego's own place on the path: its point, or between it and the next
+        j = max(min(ego, len(seg) - 1), 0)
+        ue = float(np.clip(((ex - ax[j]) * dx[j] + (ey - ay[j]) * dy[j]) / max(seg[j] ** 2, 1e-12), 0.0, 1.0))
+        s_ego = s[j] + ue * seg[j]
+    else:
+        s_ego = s[ego]
+    cross = dx[i] * (y - ay[i]) - dy[i] * (x - ax[i])
+    return float(s[i] + u[i] * seg[i] - s_ego), float(math.copysign(d[i], cross) if d[i] > 0 else 0.0)
+
+
 def contact_point(trace, f: int, other: Track) -> tuple[float, float] | None:
     """Where on the ego the contact is, (forward, left) [m] in its body frame at frame ``f``: the
     centroid of the overlap of the two bodies, or the ego's point nearest the other body."""
