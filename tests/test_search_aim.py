@@ -283,7 +283,7 @@ def test_the_shares_come_from_the_disk_cache_the_second_time(town_seeds, tmp_pat
     monkeypatch.setenv("DRIVEFUZZ_CACHE", str(tmp_path))
     seeds = town_seeds[:3]
     rmap = load_roadmap(seeds[0].network_path())
-    want = share_cells([aiming._seed_reachable(rmap, sc) for sc in seeds],
+    want = share_cells([aiming.seed_reachable(rmap, sc) for sc in seeds],
                        lambda i, c: aiming.can_aim(rmap, seeds[i], c, i))
     assert aiming.cached_shares(rmap, seeds) == want
     (entry,) = tmp_path.glob("*.npz")

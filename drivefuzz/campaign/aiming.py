@@ -24,7 +24,7 @@ BLOCKED_MISS = "lane_change around a stopped car"
 _REACH: dict[tuple, list[str]] = {}
 
 
-def _seed_reachable(rmap, seed_sc) -> list[str]:
+def seed_reachable(rmap, seed_sc) -> list[str]:
     """The interaction-coverage cells the seed's network and route offer (cached per process)."""
     from drivefuzz.triage.coverage import reachable
 
@@ -57,6 +57,7 @@ def share_cells(reaches: list[list[str]], builds: Callable[[int, str], bool] | N
 #: draws of an aimed build per (seed, cell) before :func:`can_aim` says no
 AIM_TRIES = 3
 _CAN_AIM: dict[tuple, bool] = {}
+_MUTATORS: dict[str, Any] = {}  # one Mutator per network, for can_aim
 
 
 def can_aim(rmap, seed_sc, cell: str, index: int) -> bool:
@@ -77,9 +78,6 @@ def can_aim(rmap, seed_sc, cell: str, index: int) -> bool:
         _CAN_AIM[key] = any(aimed(mut, seed_sc, cell, random.Random(f"share/{index}/{cell}/{k}"))[0].scenario
                             is not seed_sc for k in range(AIM_TRIES))
     return _CAN_AIM[key]
-
-
-_MUTATORS: dict[str, Any] = {}
 
 
 def aim_cells(reach, reached, misses: dict[str, int], own=()) -> list[str]:
@@ -150,7 +148,7 @@ def cached_shares(rmap, seeds: list) -> list[list[str]]:
             return shares
         except (ValueError, IndexError):
             pass
-    reaches = [_seed_reachable(rmap, sc) for sc in seeds]
+    reaches = [seed_reachable(rmap, sc) for sc in seeds]
     shares = share_cells(reaches, lambda i, c: can_aim(rmap, seeds[i], c, i))
     netcache.store(key, {"cells": np.array([f"{i}\t{c}" for i, cells in enumerate(shares) for c in cells] or [""])})
     return shares

@@ -60,7 +60,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import drivefuzz
-from drivefuzz.campaign.aiming import _seed_reachable, aim_cells, cached_shares, can_aim, count_misses, share_cells
+from drivefuzz.campaign.aiming import aim_cells, cached_shares, can_aim, count_misses, seed_reachable, share_cells
 from drivefuzz.campaign.config import FuzzConfig
 from drivefuzz.oracle import Misbehavior
 from drivefuzz.storage import atomic_write_json, atomic_write_text
@@ -285,7 +285,7 @@ class SeedJob:
         # no wasted executions: what this job has run, by effect (drivefuzz.search.effect); the journal's records
         # come before any execution not yet run, so a resumed job avoids exactly what the first run avoided
         executed = {r["effect"] for r in done.values() if r.get("effect")} | {effect_hash(seed_sc)}
-        reach = _seed_reachable(mutator.rmap, seed_sc) if cfg.feedback in GUIDED else ()
+        reach = seed_reachable(mutator.rmap, seed_sc) if cfg.feedback in GUIDED else ()
         own = self._own_cells(mutator.rmap, reach) if reach else ()
         misses: dict[str, int] = dict(ckpt.get("aim_misses") or {})  # per cell: aimed builds that missed it
 
@@ -362,7 +362,7 @@ class SeedJob:
             shares = cached_shares(rmap, seeds)
             atomic_write_json(path, shares)
             return shares[self.si]
-        reaches = [(reach if i == self.si else _seed_reachable(rmap, sc)) if ok else []
+        reaches = [(reach if i == self.si else seed_reachable(rmap, sc)) if ok else []
                    for i, (sc, ok) in enumerate(zip(seeds, same))]
         return share_cells(reaches, lambda i, c: can_aim(rmap, seeds[i], c, i))[self.si]
 
