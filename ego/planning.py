@@ -147,11 +147,7 @@ def _lane_points(rmap: RoadMap, lane_id: str, s0: float, s1: float) -> np.ndarra
 
 def _change_path(rmap: RoadMap, frm: str, to: str) -> bool:
     """Passenger cars may change, lane by lane, from ``frm`` to ``to`` (same edge) without a solid line."""
-    i, j = rmap.lane(frm).getIndex(), rmap.lane(to).getIndex()
-    lanes = {l.getIndex(): l.getID() for l in rmap.lane(frm).getEdge().getLanes()}
-    if j > i:
-        return all(rmap.may_change(lanes[k], left=True) for k in range(i, j))
-    return all(rmap.may_change(lanes[k], left=False) for k in range(j + 1, i + 1))
+    return rmap.may_change_to(frm, to)
 
 
 def lane_plan(rmap: RoadMap, route: tuple[str, ...]) -> list[set[str]]:

@@ -211,6 +211,15 @@ class RoadMap:
             return bool(tokens & {"all", "passenger", "private"})
         return bool(tokens & {"all", vclass})
 
+    def may_change_to(self, frm: str, to: str, vclass: str = PASSENGER) -> bool:
+        """Whether ``vclass`` may change, lane by lane, from ``frm`` to ``to`` (same edge) without crossing a
+        solid line (:meth:`may_change` at every boundary between them)."""
+        i, j = self.lane(frm).getIndex(), self.lane(to).getIndex()
+        ids = {l.getIndex(): l.getID() for l in self.lane(frm).getEdge().getLanes()}
+        if j > i:
+            return all(self.may_change(ids[k], left=True, vclass=vclass) for k in range(i, j))
+        return all(self.may_change(ids[k], left=False, vclass=vclass) for k in range(j + 1, i + 1))
+
     def is_normal_edge(self, edge) -> bool:
         return edge.getFunction() == ""
 

@@ -49,8 +49,9 @@ from drivefuzz.search import catalogue as cat
 from drivefuzz.search import programs as prog
 from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
-from drivefuzz.search.aim_place import (JUNCTION_COLUMNS, drawn_level, follower_at, into_lane, lane_change_moves,
-                                        meeting, passes, profile_spots, stopped_past, walker_from_left)
+from drivefuzz.search.aim_place import (JUNCTION_COLUMNS, drawn_level, follower_at, grip_at, into_lane,
+                                        lane_change_moves, meeting, passes, profile_spots, shifted_start,
+                                        stopped_past, walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 
 #: [m] an actor this far before a junction (along the ego's route) meets the ego at it
@@ -63,6 +64,9 @@ TIMED = ("passes", "drawn_level", "follower", "crossing", "oncoming", "grip", "i
 INTO_LANE = {"vehicle/behind": ("behind", None), "vehicle/rear_left": ("rear", "left"),
              "vehicle/rear_right": ("rear", "right"), "vehicle/left": ("level", "left"),
              "vehicle/right": ("level", "right")}
+#: [m] past a lane change's place where a car stands on the lane the ego changes into (4-14 m, as past a turn:
+#: the ego stopped for it before it moved over)
+STANDING_PAST_CHANGE_M = (10.0, 22.0)
 #: share of the aimed components built on the mission alone (the parent's actors, puddles and light shifts
 #: dropped): on a lineage's parent, with up to 12 actors that slow, stop and meet the ego first, the place and
 #: timing (the mutator's profile of the ego on an empty road) are off. One 1,000-execution town campaign each:
@@ -115,17 +119,26 @@ def _aimed_party(mut: Mutator, sc: Scenario, cell: str, row: str, col: str, rng:
     """``sc`` with a component built for the party x column ``cell``; ``sc`` itself (said why) when it cannot."""
     base, at, setup = meeting(mut, sc, col, rng)
     if col == "lane_change":
-        moves = lane_change_moves(mut, sc)
+        moves, shifted = lane_change_moves(mut, sc), None
+        if not moves:  # the route needs no lane change from the seed's start lane: start on one that needs it
+            shifted = shifted_start(mut, sc, rng)
+            if shifted is not None:
+                base, setup = shifted
+                moves = lane_change_moves(mut, base)
+        on = sc if shifted is None else base
         where, side = INTO_LANE.get(row, (None, None))
         fit = [m for m in moves if side in (None, m[1])]
         if where and fit:  # a car on the lane the ego changes into, where the cell wants it
             situation = Situation("into_lane", "", partial(into_lane, move=rng.choice(fit), where=where))
-            m = add_situation(mut, sc, situation, rng)
-            return Mutation(m.scenario, f"aim {cell}: {m.description}", m.retries)
-        base, at, setup = (sc, rng.choice(moves)[0], "") if moves else _blocked_lane(mut, sc, rng)
+            m = add_situation(mut, on, situation, rng)
+            if m.scenario is on:
+                return Mutation(sc, f"aim {cell}: {m.description}", m.retries)
+            what = f"{setup}; {m.description}" if setup else m.description
+            return Mutation(m.scenario, f"aim {cell}: {what}", m.retries)
+        base, at, setup = (on, rng.choice(moves)[0], setup) if moves else _blocked_lane(mut, sc, rng)
     if col in JUNCTION_COLUMNS + ("lane_change",) and at is None:
         return Mutation(sc, f"aim {cell}: the route has no place for it")
-    if col == "lane_change" and row == "vehicle/ahead" and setup:  # the car it changes lanes around is that party
+    if col == "lane_change" and row == "vehicle/ahead" and setup.startswith(BLOCKED_LANE):  # the car it passes
         return Mutation(base, f"aim {cell}: {setup}")
     builders = _party_builders(mut, base, row, col, at)
     if not builders:
@@ -245,6 +258,8 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
     kind, approach = party.split("/", 1)
     side = "left" if approach.endswith("left") else "right" if approach.endswith("right") else None
     if kind == "none":
+        if col == "lane_change" and at is not None:
+            return [Situation("grip", "", partial(grip_at, at=at))]
         return [Situation("grip", "", cat.slippery_braking_zone)]
     if kind == "pedestrian":
         if not mut._walkable(sc):
@@ -265,6 +280,8 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
                           partial(_on_side, mut, sc, side))]
     if approach == "ahead" and col in ("turn_left", "turn_right") and at is not None:
         return [Situation("stopped_past", "", partial(stopped_past, at=at))]
+    if approach == "ahead" and col == "lane_change" and at is not None:  # standing on the lane it changes into
+        return [Situation("stopped_past", "", partial(stopped_past, at=at, past=STANDING_PAST_CHANGE_M))]
     if approach == "ahead":
         names = {"brake": ("lead_brakes", "brake_check", "lead_stopped"),
                  "stop_go": ("lead_stopped", "pulls_out", "lead_brakes"),

@@ -27,8 +27,9 @@ import random
 
 import numpy as np
 
-from drivefuzz.scenario import ActorKind, Maneuver, ManeuverAction, NavType, Scenario, SignalShift, Trigger
+from drivefuzz.scenario import ActorKind, Maneuver, ManeuverAction, NavType, Puddle, Scenario, SignalShift, Trigger
 from drivefuzz.scenario.model import EGO_LENGTH, EGO_WIDTH, MIN_CLOSE_TTC, MIN_FOLLOW_S, NPC_WIDTH, drift_room
+from drivefuzz.scenario.roadmap import PASSENGER
 from drivefuzz.scenario.signals import phase_starts, shiftable
 from drivefuzz.search import catalogue as cat
 from drivefuzz.search import programs as prog
@@ -106,6 +107,47 @@ def lane_change_moves(mut: Mutator, sc: Scenario) -> list[tuple[float, str, str,
     return out
 
 
+#: [m] from the ego's start to its start edge's end that a start on another lane needs: the reference ADS changes
+#: lanes across the middle of what is left (ego/planning.py), done this far on at least 25 m before the stop line
+START_SHIFT_ROOM_M = 60.0
+
+
+def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random) -> tuple[Scenario, str] | None:
+    """(``sc`` with the ego starting on another lane of its start edge, from which its route makes it change
+    lanes on that edge; what was done), None where no such lane will do. The route, start position and goal stay:
+    the ego starts on a lane that does not lead on (a car parked on the left of a one-way street, a driver who
+    took the wrong lane), and a careful driver changes lanes in the room left. A lane qualifies when passenger cars
+    may use it and change from it to a lane that leads on without crossing a solid line, with
+    :data:`START_SHIFT_ROOM_M` to the edge's end, the start speed within its limit, and no actor's start within
+    the separation of the ego's new one. The only way a route whose lanes lead on everywhere (every seed of the
+    intersection) makes an ego change lanes that changes lanes only where its route needs it."""
+    rmap, m = mut.rmap, sc.mission
+    start = rmap.lane(m.start_lane)
+    edge = start.getEdge()
+    if edge.getLength() - m.start_pos < START_SHIFT_ROOM_M:
+        return None
+    sep = mut.cfg.min_separation + EGO_LENGTH / 2
+    options = []
+    for lane in edge.getLanes():
+        lane_id = lane.getID()
+        if lane_id == m.start_lane or not lane.allows(PASSENGER) or m.start_speed > lane.getSpeed():
+            continue
+        new = sc.model_copy(update={"mission": m.model_copy(update={"start_lane": lane_id})})
+        at = mut.lane_change_at(new, 0)
+        to = mut.ego_lane_at(new, 0, edge.getLength())
+        if at is None or not rmap.may_change_to(lane_id, to):
+            continue
+        x, y, _ = rmap.geom(lane_id).position(m.start_pos)
+        if any(math.hypot(x - ax, y - ay) < sep for ax, ay, _ in
+               (rmap.geom(a.start_lane).position(a.start_pos) for a in sc.actors)):
+            continue
+        options.append((new, lane_id))
+    if not options:
+        return None
+    new, lane_id = rng.choice(options)
+    return new, f"the ego starts on {lane_id} (was {m.start_lane}): its route makes it change lanes"
+
+
 #: [s] the time to collision at which a car closes in from behind on the lane the ego has just changed into
 INTO_LANE_TTC = (1.2, 2.6)
 
@@ -141,6 +183,20 @@ def into_lane(mut: Mutator, sc: Scenario, rng: random.Random, move: tuple[float,
     a = prog._vehicle(mut, sc, mut.rmap.lane(to_lane), start, speed, depart, [])
     return [a], [], {}, (f"{a.id} on {to_lane} at {speed:.1f} m/s, {where} the ego as it changes lanes into it at "
                          f"{at:.0f} m ({t_at:.1f} s)")
+
+
+def grip_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
+    """A low-friction patch (mu 0.05-0.3) across the ego's lane and the lanes beside it, from 5 m before the route
+    distance ``at`` [m]: the ego changes lanes (or drives on) on it there."""
+    spot = cat._route_spot(mut, sc, max(at - 5.0, 0.0))
+    if spot is None:
+        return None
+    _, lane, pos = spot
+    length = rng.uniform(12.0, 25.0)
+    x, y, h = mut.rmap.geom(lane).position(pos + length / 2.0)
+    p = Puddle(x=round(x, 2), y=round(y, 2), length=round(length, 2), width=round(rng.uniform(6.0, 8.0), 2),
+               rotation=round(h, 3), friction=round(rng.uniform(0.05, 0.3), 2))
+    return [], [p], {}, f"puddle mu={p.friction} on {lane} from {pos:.0f} m, where the ego is expected at {at:.0f} m"
 
 
 def _goal(mut: Mutator, sc: Scenario) -> float:
@@ -380,14 +436,14 @@ def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
                          f"~{t_meet:.1f} s{how}")
 
 
-def stopped_past(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
+def stopped_past(mut: Mutator, sc: Scenario, rng: random.Random, at: float, past: tuple[float, float] = (4.0, 14.0)):
     """A vehicle standing on the lane the ego turns into, 4-14 m past the place ``at`` (just out of the turn's
     junction): the end of a queue, or a car waiting to turn off, that the ego sees as its heading comes round and
     meets while it still turns. It drives on 2-6 s after the ego is expected there (an ADS that waits behind a
     stopped car, as the reference ADS does, would otherwise stand there until the immobility oracle fires, one
     more execution of that finding). (The catalogue's vehicles ahead start before the junction: the ego met them
     there, going straight; 0 of 7 aimed builds for a car ahead in a left turn on town's seeds.)"""
-    past = rng.uniform(4.0, 14.0)  # farther, the ego had come out of the turn when it met it (braking, cruising)
+    past = rng.uniform(*past)  # farther, the ego had come out of the turn when it met it (braking, cruising)
     spot = cat._route_spot(mut, sc, at + past)
     turn = cat._route_spot(mut, sc, at)
     if spot is None or turn is None or spot[0] != turn[0]:  # past the next junction: not the turn's exit
