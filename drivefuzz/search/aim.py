@@ -51,7 +51,7 @@ from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
 from drivefuzz.search.aim_place import (JUNCTION_COLUMNS, drawn_level, follower_at, grip_at, into_lane,
                                         lane_change_moves, meeting, passes, profile_spots, shifted_start,
-                                        stopped_past, walker_from_left)
+                                        started_at_speed, stopped_past, walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 
 #: [m] an actor this far before a junction (along the ego's route) meets the ego at it
@@ -67,6 +67,10 @@ INTO_LANE = {"vehicle/behind": ("behind", None), "vehicle/rear_left": ("rear", "
 #: [m] past a lane change's place where a car stands on the lane the ego changes into (4-14 m, as past a turn:
 #: the ego stopped for it before it moved over)
 STANDING_PAST_CHANGE_M = (10.0, 22.0)
+#: [m] before its stop line where the ego is, coming to its red, as a crossing car passes the conflict point
+CROSS_AT_RED_M = (4.0, 14.0)
+#: what meets an ego that enters at speed (too soon for a timed party to run up): a car ahead, braking or slower
+MOVING_START_AHEAD = ("lead_brakes", "brake_check", "lead_slower", "slow_ahead")
 #: share of the aimed components built on the mission alone (the parent's actors, puddles and light shifts
 #: dropped): on a lineage's parent, with up to 12 actors that slow, stop and meet the ego first, the place and
 #: timing (the mutator's profile of the ego on an empty road) are off. One 1,000-execution town campaign each:
@@ -372,7 +376,9 @@ def _crossing(mut, sc, rng, want: str, col: str, at: float | None = None):
 
     # where the ego enters on yellow, a lawful car on the cross road waits at its red: one that runs it meets the ego
     # (at the ego's red the reference ADS waits, and enters at green: a red runner then met it at green)
-    return cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=col == "signal/amber")
+    # at the ego's red, one that passes as the ego comes to its line (after the ego waited, it met the ego at green)
+    return cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=col == "signal/amber",
+                                before_line=CROSS_AT_RED_M if col == "signal/red" else None)
 
 
 def _end_heading(edge) -> float:
@@ -457,15 +463,23 @@ def _condition(mut: Mutator, sc: Scenario, band: str, condition: str, rng: rando
         # off the route (a car on the road the other way) the filter cannot say: the builder timed it
         return d is None or 0.8 * lo <= prog._ego_speed(mut, sc, d) <= 1.2 * hi
 
-    if condition == "low_friction":
+    fast = lo >= BANDS["30-60 km/h"][0]
+    if condition == "low_friction" and not fast:
         m = add_situation(mut, sc, Situation("grip", "", cat.slippery_braking_zone), rng)
         return Mutation(m.scenario, f"aim speed-condition:{band}|{condition}: {m.description}", m.retries), False
-    if lo >= BANDS["30-60 km/h"][0]:
+    parent, setup, at = sc, "", None
+    if fast:
         # at speed the ego brakes for a vehicle ahead before the encounter (measured on town: none of 23 such aims
         # reached 30-60 km/h, every one of them 10-30 km/h): a party timed to a place inside the band (a passer
         # without a place takes the slowest of its draws: seldom the band asked for), or a crossing walker; the place
-        # well inside the band where the route has one (the ADS may drive below the profile)
+        # well inside the band where the route has one (the ADS may drive below the profile); where the route has
+        # none (too short to speed up to it), the ego enters at that speed where its start lane allows it
         spots = profile_spots(mut, sc, "speed", (1.2 * lo, 0.9 * hi)) or profile_spots(mut, sc, "speed", (lo, hi))
+        if not spots:
+            moving = started_at_speed(mut, sc, lo, hi, rng)
+            if moving is not None:
+                sc, setup = moving
+                spots = profile_spots(mut, sc, "speed", (lo, hi))
         at = rng.choice(spots) if spots else None
         timed = [] if at is None else [Situation("passes", "", partial(passes, at=at)),
                                        Situation("drawn_level", "", partial(drawn_level, at=at)),
@@ -473,6 +487,8 @@ def _condition(mut: Mutator, sc: Scenario, band: str, condition: str, rng: rando
                                        Situation("oncoming", "", partial(oncoming, at=at))]
         near = [Situation("walker_crosses", "", partial(cat.walker_crosses, early=(-1.0, 1.5)))] \
             if mut._walkable(sc) else []
+        if setup:  # it enters at speed: too soon for a timed party to run up; a car ahead that brakes or is slower
+            near = [s for s in (*cat.SITUATIONS, *prog.PROGRAMS) if s.name in MOVING_START_AHEAD]
     else:
         # slower, what the ego drives up to: a vehicle ahead, stopped, slow or braking. (Aimed at these bands too,
         # the timed parties reached the cell as often on town and took the vehicles ahead a 0-10 km/h low-sun aim
@@ -480,11 +496,26 @@ def _condition(mut: Mutator, sc: Scenario, band: str, condition: str, rng: rando
         # against 5 of 5)
         timed, near = [], [s for s in (*cat.SITUATIONS, *prog.PROGRAMS) if s.name in
                            ("lead_stopped", "lead_brakes", "brake_check", "slow_ahead", "lead_slower", "pulls_out")]
+    if condition == "low_friction" and not setup:  # fast: a low-friction patch where the timed party meets the ego
+        near = []
     pick = rng.choice(timed + near) if timed + near else None
     if pick is None:
-        return Mutation(sc, f"aim speed-condition:{band}|{condition}: nothing builds it on this mission"), False
+        return Mutation(parent, f"aim speed-condition:{band}|{condition}: nothing builds it on this mission"), False
     keep = None if pick in timed or band == "0-10 km/h" else at_speed
     m = add_situation(mut, sc, _filtered(pick, keep), rng)
+    if m.scenario is sc:
+        return Mutation(parent, f"aim speed-condition:{band}|{condition}: {m.description}", m.retries), False
+    if setup:
+        m = Mutation(m.scenario, f"{setup}; {m.description}", m.retries)
+    if condition == "low_friction":  # where the timed party meets the ego, else 10-30 m before the car ahead
+        if at is None or pick not in timed:
+            d = _distance(mut, sc, m.scenario.actors[-1].start_lane, m.scenario.actors[-1].start_pos)
+            at = None if d is None else max(d - rng.uniform(10.0, 30.0), 0.0)
+        patch = None if at is None else grip_at(mut, sc, rng, at)
+        if patch is None:
+            return Mutation(parent, f"aim speed-condition:{band}|{condition}: no place for a patch"), False
+        new = m.scenario.model_copy(update={"puddles": m.scenario.puddles + tuple(patch[1])})
+        return Mutation(new, f"aim speed-condition:{band}|{condition}: {m.description}; {patch[3]}", m.retries), False
     # the reference ADS drives no faster than it can stop within what it sees: at fog 70 (40 m of range) under
     # 60 km/h, at 45 (62 m) about 85 km/h
     top = 45.0 if lo >= BANDS["60+ km/h"][0] else 70.0 if lo >= BANDS["30-60 km/h"][0] else 100.0

@@ -148,6 +148,19 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random) -> tuple[Scena
     return new, f"the ego starts on {lane_id} (was {m.start_lane}): its route makes it change lanes"
 
 
+def started_at_speed(mut: Mutator, sc: Scenario, lo: float, hi: float, rng: random.Random) -> tuple[Scenario, str] | None:
+    """(``sc`` with the ego entering at a speed inside the band ``lo``-``hi`` [m/s]; what was done), None where its
+    start lane's limit does not allow one (at most 0.95 of it). For a speed band that a route too short to speed up
+    on never reaches: the ego is already moving at the start, as on a motorway it joined before."""
+    limit = mut.rmap.lane(sc.mission.start_lane).getSpeed()
+    top = min(0.9 * hi, 0.95 * limit)
+    if top <= 1.1 * lo or sc.mission.start_speed >= lo:
+        return None
+    v = round(rng.uniform(1.1 * lo, top), 2)
+    new = sc.model_copy(update={"mission": sc.mission.model_copy(update={"start_speed": v})})
+    return new, f"the ego enters at {v:.1f} m/s (was {sc.mission.start_speed:.1f})"
+
+
 #: [s] the time to collision at which a car closes in from behind on the lane the ego has just changed into
 INTO_LANE_TTC = (1.2, 2.6)
 
