@@ -289,12 +289,10 @@ def test_a_walker_from_the_left_starts_left_of_the_ego(mut, town_seeds):
     assert built >= 4
 
 
-def test_the_profile_takes_the_pace_the_ads_was_seen_driving(highway_seeds, town_seeds):
+def test_the_profile_takes_the_pace_the_ads_was_seen_driving(highway_seeds):
     """On the highway the reference ADS drives 11-16 m/s where the empty-road model says 31: its aims came seconds
-    early. A job journals the seed run's metres driven and the mutator times the mission by them; a scenario that
-    shifts a light keeps the model (the run waited at the lights as they were)."""
+    early. A job journals the seed run's metres driven and the mutator times the mission by them."""
     from drivefuzz.campaign.job import TRAVEL_EVERY_S, ego_travel
-    from drivefuzz.scenario import SignalShift
 
     sc = highway_seeds[2]
     mut = Mutator(load_roadmap(sc.network_path()))
@@ -306,14 +304,37 @@ def test_the_profile_takes_the_pace_the_ads_was_seen_driving(highway_seeds, town
     seen = mut._ego_eta(sc, goal)
     assert abs(model - t_run) > 10.0 and abs(seen - t_run) < 0.25 * abs(model - t_run), (seen, model, t_run)
 
-    town = town_seeds[0]
-    tmut = Mutator(load_roadmap(town.network_path()))
-    run = execute(town)
-    shifted = town.model_copy(update={"signals": (SignalShift(tls="C2", shift=20.0),)})
-    before = [tmut._ego_eta(x, 150.0) for x in (town, shifted)]
-    tmut.observe(town, ego_travel(run.trace), TRAVEL_EVERY_S)
-    assert tmut._ego_eta(shifted, 150.0) == before[1]
-    assert tmut._ego_eta(town, 150.0) != before[0]
+
+def test_a_shifted_light_is_timed_by_the_run_s_pace_and_the_model_s_wait(town_seeds):
+    """With a light shifted (for an amber or a red aim), the profile is the seed run's pace plus what the shift
+    changes in the model (a wait at red), not the model alone: on town's seeds, a light of the route shifted to
+    turn red as the ego comes, the time the clean reference ADS enters the edge after it, against the profile:
+    median error 0.95 s against 2.2 s (12 lights). Three in twelve are a cycle off either way (about 50 s: the
+    ego waited a cycle the profile did not, or the reverse)."""
+    from drivefuzz.campaign.job import TRAVEL_EVERY_S, ego_travel
+
+    rmap = load_roadmap(town_seeds[0].network_path())
+    seen, model = Mutator(rmap), Mutator(rmap)
+    err_seen, err_model = [], []
+    for k, sc in enumerate(town_seeds):
+        seen.observe(sc, ego_travel(execute(sc).trace), TRAVEL_EVERY_S)
+        for col in ("signal/red", "signal/amber"):
+            shifted, at, _ = meeting(seen, sc, col, random.Random(k))
+            if at is None or not shifted.signals:
+                continue
+            lanes = np.array([str(x) for x in execute(shifted).trace["lane"]])
+            route, d = seen._route(sc), -sc.mission.start_pos
+            for i, e in enumerate(route):
+                if i and d > at:  # the edge after the shifted light's junction
+                    hit = np.nonzero(np.char.startswith(lanes, e + "_"))[0]
+                    if len(hit):
+                        t = hit[0] * 0.05
+                        err_seen.append(abs(t - seen._ego_eta(shifted, d + 0.5)))
+                        err_model.append(abs(t - model._ego_eta(shifted, d + 0.5)))
+                    break
+                d += rmap.edge(e).getLength()
+    assert len(err_seen) >= 8
+    assert np.median(err_seen) < np.median(err_model), (np.round(err_seen, 1), np.round(err_model, 1))
 
 
 def test_the_lane_changes_a_route_makes_the_ego_do_are_where_and_when_it_does_them(mut, town_seeds, highway_seeds):

@@ -6,8 +6,8 @@ the rest to :meth:`drivefuzz.search.mutate.Mutator.successor`, which, for a shar
 component (``MutationConfig.aim_share``), draws one unreached cell (:func:`pick_cell`, uniformly) and builds what
 should produce it (:func:`aimed`). The column is turned into a place on the ego's route first
 (:func:`drivefuzz.search.aim_place.meeting`: a junction's stop line, with its light shifted for amber or red; a
-place where the ego is expected to stand, speed up, slow down or cruise; a route-forced lane change), and the
-party is built to meet the ego there:
+place where the ego is expected to stand, speed up, slow down or cruise; a route-forced lane change, where the
+route forces none on a start on another lane of the start edge), and the party is built to meet the ego there:
 
 - **party** (the rows of party x manoeuvre and party x element): a situation of the catalogue or a maneuver
   program that creates that party, from that side: a vehicle ahead (stopped, slower, braking, pulling out),
@@ -25,10 +25,12 @@ party is built to meet the ego there:
   the ego, a low-friction patch; ``clear`` clears them) and, up to 30 km/h, a vehicle ahead near a place where the
   ego's expected speed (the mutator's profile of the route) is in the band; from 30 km/h (the ego brakes for a
   vehicle ahead before the encounter) a party timed to such a place (a car passing close by in the lane beside,
-  either way, a follower, an oncoming car) or a crossing walker.
+  either way, a follower, an oncoming car) or a crossing walker; where the route never reaches the band, an ego
+  that enters at speed and a car ahead.
 
-In a fuzz job the profile is the seed run's own pace (:meth:`drivefuzz.search.mutate.Mutator.observe`) wherever no
-light is shifted: the ADS under test, not a model of one, says when the ego gets where.
+In a fuzz job the profile is the seed run's own pace (:meth:`drivefuzz.search.mutate.Mutator.observe`; where a light
+is shifted, plus the wait the shift adds in the model): the ADS under test, not a model of one, says when the ego
+gets where.
 
 Every actor still passes the fairness rules (:func:`drivefuzz.search.fairness.unfair`) and the separation:
 aiming changes what is drawn, never what is allowed. The cell drawn and the draws after it come from the
@@ -521,7 +523,8 @@ def _condition(mut: Mutator, sc: Scenario, band: str, condition: str, rng: rando
     top = 45.0 if lo >= BANDS["60+ km/h"][0] else 70.0 if lo >= BANDS["30-60 km/h"][0] else 100.0
     w = _weather(mut, sc, m.scenario, condition, rng, top=top)
     new = m.scenario.model_copy(update={"weather": w})
-    return Mutation(new, f"aim speed-condition:{band}|{condition}: {m.description}; weather {condition}", m.retries), True
+    what = f"aim speed-condition:{band}|{condition}: {m.description}; weather {condition}"
+    return Mutation(new, what, m.retries), True
 
 
 def _weather(mut: Mutator, sc: Scenario, new: Scenario, condition: str, rng: random.Random, top: float = 100.0):

@@ -148,7 +148,8 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random) -> tuple[Scena
     return new, f"the ego starts on {lane_id} (was {m.start_lane}): its route makes it change lanes"
 
 
-def started_at_speed(mut: Mutator, sc: Scenario, lo: float, hi: float, rng: random.Random) -> tuple[Scenario, str] | None:
+def started_at_speed(mut: Mutator, sc: Scenario, lo: float, hi: float,
+                     rng: random.Random) -> tuple[Scenario, str] | None:
     """(``sc`` with the ego entering at a speed inside the band ``lo``-``hi`` [m/s]; what was done), None where its
     start lane's limit does not allow one (at most 0.95 of it). For a speed band that a route too short to speed up
     on never reaches: the ego is already moving at the start, as on a motorway it joined before."""

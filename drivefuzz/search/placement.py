@@ -118,23 +118,28 @@ class RoutePlacement:
         one metre driven: the speed at a step is 1 m over its time.
 
         Where the ADS under test was seen driving this mission with no light shifted (:meth:`observe`: the
-        seed's own run, in a fuzz job), a scenario with no light shifted takes that run's times instead: on the
+        seed's own run, in a fuzz job), a scenario of that mission takes that run's times instead: on the
         highway the reference ADS drives 11-16 m/s where the empty-road model says 31 m/s, so every actor timed
-        by the model came too early."""
+        by the model came too early. With lights shifted, the run's times plus the difference the shifts make to
+        the model's (a wait at a light shifted to red, none where one shifted to green; tenth session: the model
+        alone timed the lights shifted for amber, and everything aimed at them, by an empty-road pace)."""
         m = sc.mission
         key = (m.start_lane, m.start_pos, m.goal_edge, m.start_speed, tuple((x.tls, x.shift) for x in sc.signals))
         if key in self._profile_cache:
             return self._profile_cache[key]
-        seen = self._observed.get(key[:4]) if not sc.signals else None
+        seen = self._observed.get(key[:4])
         s_route, t = self._model_profile(sc)
-        if seen is not None:
+        if seen is not None and sc.signals:  # the run's pace, plus what the shifted lights change in the model
+            _, plain = self._model_profile(sc.model_copy(update={"signals": ()}))
+            t = _observed_times(plain, *seen) + (t - plain)
+        elif seen is not None:
             t = _observed_times(t, *seen)
         self._profile_cache[key] = (s_route, t)
         return self._profile_cache[key]
 
     def observe(self, sc: Scenario, travelled: list[float], every: float) -> None:
         """The ego's metres driven from its start every ``every`` s of a run of ``sc``'s mission with the ADS under
-        test, no light shifted: scenarios of that mission without light shifts are timed by it (:meth:`_ego_profile`)."""
+        test, no light shifted: scenarios of that mission are timed by it (:meth:`_ego_profile`)."""
         if sc.signals:  # its run waited at shifted lights: it says nothing of the mission's own
             return
         m = sc.mission
