@@ -119,8 +119,8 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random) -> tuple[Scena
     took the wrong lane), and a careful driver changes lanes in the room left. A lane qualifies when passenger cars
     may use it and change from it to a lane that leads on without crossing a solid line, with
     :data:`START_SHIFT_ROOM_M` to the edge's end, the start speed within its limit, and no actor's start within
-    the separation of the ego's new one. The only way a route whose lanes lead on everywhere (every seed of the
-    intersection) makes an ego change lanes that changes lanes only where its route needs it."""
+    the separation of the ego's new one. On a route whose lanes lead on everywhere (every seed of the
+    intersection), it is what makes an ADS that changes lanes only where its route needs it change lanes at all."""
     rmap, m = mut.rmap, sc.mission
     start = rmap.lane(m.start_lane)
     edge = start.getEdge()
@@ -450,13 +450,14 @@ def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
                          f"~{t_meet:.1f} s{how}")
 
 
-def stopped_past(mut: Mutator, sc: Scenario, rng: random.Random, at: float, past: tuple[float, float] = (4.0, 14.0)):
-    """A vehicle standing on the lane the ego turns into, 4-14 m past the place ``at`` (just out of the turn's
-    junction): the end of a queue, or a car waiting to turn off, that the ego sees as its heading comes round and
-    meets while it still turns. It drives on 2-6 s after the ego is expected there (an ADS that waits behind a
-    stopped car, as the reference ADS does, would otherwise stand there until the immobility oracle fires, one
-    more execution of that finding). (The catalogue's vehicles ahead start before the junction: the ego met them
-    there, going straight; 0 of 7 aimed builds for a car ahead in a left turn on town's seeds.)"""
+def stopped_past(mut: Mutator, sc: Scenario, rng: random.Random, at: float,
+                 past: tuple[float, float] = (4.0, 14.0)):
+    """A vehicle standing on the lane the ego turns into (or changes into), ``past`` m past the place ``at`` (4-14 m:
+    just out of the turn's junction): the end of a queue, or a car waiting to turn off, that the ego sees as its
+    heading comes round and meets while it still turns. It drives on 2-6 s after the ego is expected there (an ADS
+    that waits behind a stopped car, as the reference ADS does, would otherwise stand there until the immobility
+    oracle fires, one more execution of that finding). (The catalogue's vehicles ahead start before the junction:
+    the ego met them there, going straight; 0 of 7 aimed builds for a car ahead in a left turn on town's seeds.)"""
     past = rng.uniform(*past)  # farther, the ego had come out of the turn when it met it (braking, cruising)
     spot = cat._route_spot(mut, sc, at + past)
     turn = cat._route_spot(mut, sc, at)

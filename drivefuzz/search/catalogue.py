@@ -221,7 +221,8 @@ def walker_crosses(mut, sc, rng, early=(0.0, 4.0), at: float | None = None):
     return [a], [], {}, f"{a.id} crosses at {spot.lane} @ {spot.pos:.1f} m, leaving at {depart} s"
 
 
-def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool = False, before_line: tuple[float, float] | None = None):
+def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool = False,
+                     before_line: tuple[float, float] | None = None):
     """A lawful vehicle on another approach to a junction of the ego's route, timed to reach the conflict
     point with the ego: whoever must yield has to (straight crossing paths, left turn across path). With
     ``keep``, only the conflicts (``Mutator._conflicts``' tuples) it accepts (:mod:`drivefuzz.search.aim`).

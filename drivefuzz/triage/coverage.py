@@ -21,10 +21,11 @@ The full cross product (10^4 cells, most of them impossible) is neither reachabl
 encounter counts in three *projections* (:data:`PROJECTIONS`): party x manoeuvre, party x element, speed x
 condition. A cell's key is ``"<projection>:<row>|<column>"``.
 
-:func:`reachable` derives the cells a network and its seeds' routes can offer at all (a mission's route is
-never mutated; an aim may start the ego on another lane of its start edge, or at speed): no roundabout cells off a ring, no pedestrian cells without sidewalks or crossings on
-the route, no lane-change or side cells without a multi-lane edge, turns only where a route turns,
-speed bands up to the route's limits. It is an over-approximation (docs/coverage.md says where).
+:func:`reachable` derives the cells a network and its seeds' routes can offer at all (a mission's route is never
+mutated; an aim may start the ego on another lane of its start edge, or at speed): no roundabout cells off a ring,
+no pedestrian cells without sidewalks or crossings on the route, no lane-change or side cells without a multi-lane
+edge, turns only where a route turns, speed bands up to the route's limits. It is an over-approximation
+(docs/coverage.md says where).
 
 Pure functions of Trace + Scenario + RoadMap (+ RiskScore); used by the fuzz job (each execution's
 cells go into its journal record), the schedule (novelty), ``drivefuzz coverage``, the status screen and
