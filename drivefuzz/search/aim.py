@@ -73,6 +73,8 @@ STANDING_PAST_CHANGE_M = (10.0, 22.0)
 CROSS_AT_RED_M = (4.0, 14.0)
 #: what meets an ego that enters at speed (too soon for a timed party to run up): a car ahead, braking or slower
 MOVING_START_AHEAD = ("lead_brakes", "brake_check", "lead_slower", "slow_ahead")
+#: [m] past a lane change's place where an oncoming car is level with the ego
+ONCOMING_AFTER_CHANGE_M = 12.0
 #: share of the aimed components built on the mission alone (the parent's actors, puddles and light shifts
 #: dropped): on a lineage's parent, with up to 12 actors that slow, stop and meet the ego first, the place and
 #: timing (the mutator's profile of the ego on an empty road) are off. One 1,000-execution town campaign each:
@@ -306,6 +308,8 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
     if approach in ("rear_left", "rear_right"):  # from behind on the lane beside, passing close by
         return [_filtered(Situation("passes", "", partial(passes, at=at, side=side)), partial(_on_side, mut, sc, side))]
     if approach == "oncoming":
+        if col == "lane_change" and at is not None:  # level just after the change (nearest an ego that moved left)
+            at += ONCOMING_AFTER_CHANGE_M
         return [Situation("oncoming", "", oncoming if at is None else partial(oncoming, at=at)),
                 Situation("crossing", "", partial(_crossing, want="oncoming", col=col, at=at))]
     return [Situation("crossing", "", partial(_crossing, want=approach, col=col, at=at))]  # crossing_left / _right

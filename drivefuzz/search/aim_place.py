@@ -199,17 +199,24 @@ def into_lane(mut: Mutator, sc: Scenario, rng: random.Random, move: tuple[float,
                          f"{at:.0f} m ({t_at:.1f} s)")
 
 
+#: [m] before the place where a patch aimed at it begins, and [m] how long it is (``grip_at``)
+GRIP_BEFORE_M, GRIP_LENGTH_M = 20.0, (25.0, 35.0)
+#: friction of a patch aimed at a place: ice (an accelerating or lane-changing ego uses 1 m/s^2 of it at most)
+GRIP_MU = (0.05, 0.15)
+
+
 def grip_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
-    """A low-friction patch (mu 0.05-0.3) across the ego's lane and the lanes beside it, from 5 m before the route
-    distance ``at`` [m]: the ego changes lanes (or drives on) on it there."""
-    spot = cat._route_spot(mut, sc, max(at - 5.0, 0.0))
+    """A low-friction patch (:data:`GRIP_MU`) across the ego's lane and the lanes beside it, from
+    :data:`GRIP_BEFORE_M` before the route distance ``at`` [m]: the ego changes lanes (or drives on) on it there.
+    (From 5 m before, mu 0.05-0.3: the ego had changed lanes when it came to it, and used a third of its grip.)"""
+    spot = cat._route_spot(mut, sc, max(at - GRIP_BEFORE_M, 0.0))
     if spot is None:
         return None
     _, lane, pos = spot
-    length = rng.uniform(12.0, 25.0)
+    length = rng.uniform(*GRIP_LENGTH_M)
     x, y, h = mut.rmap.geom(lane).position(pos + length / 2.0)
     p = Puddle(x=round(x, 2), y=round(y, 2), length=round(length, 2), width=round(rng.uniform(6.0, 8.0), 2),
-               rotation=round(h, 3), friction=round(rng.uniform(0.05, 0.3), 2))
+               rotation=round(h, 3), friction=round(rng.uniform(*GRIP_MU), 2))
     return [], [p], {}, f"puddle mu={p.friction} on {lane} from {pos:.0f} m, where the ego is expected at {at:.0f} m"
 
 
