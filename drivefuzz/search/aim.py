@@ -69,8 +69,6 @@ INTO_LANE = {"vehicle/behind": ("behind", None), "vehicle/rear_left": ("rear", "
 #: [m] past a lane change's place where a car stands on the lane the ego changes into (4-14 m, as past a turn:
 #: the ego stopped for it before it moved over)
 STANDING_PAST_CHANGE_M = (10.0, 22.0)
-#: [m] before its stop line where the ego is, coming to its red, as a crossing car passes the conflict point
-CROSS_AT_RED_M = (4.0, 14.0)
 #: what meets an ego that enters at speed (too soon for a timed party to run up): a car ahead, braking or slower
 MOVING_START_AHEAD = ("lead_brakes", "brake_check", "lead_slower", "slow_ahead")
 #: [m] past a lane change's place where an oncoming car is level with the ego
@@ -382,9 +380,7 @@ def _crossing(mut, sc, rng, want: str, col: str, at: float | None = None):
 
     # where the ego enters on yellow, a lawful car on the cross road waits at its red: one that runs it meets the ego
     # (at the ego's red the reference ADS waits, and enters at green: a red runner then met it at green)
-    # at the ego's red, one that passes as the ego comes to its line (after the ego waited, it met the ego at green)
-    return cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=col == "signal/amber",
-                                before_line=CROSS_AT_RED_M if col == "signal/red" else None)
+    return cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=col == "signal/amber")
 
 
 def _end_heading(edge) -> float:

@@ -221,15 +221,13 @@ def walker_crosses(mut, sc, rng, early=(0.0, 4.0), at: float | None = None):
     return [a], [], {}, f"{a.id} crosses at {spot.lane} @ {spot.pos:.1f} m, leaving at {depart} s"
 
 
-def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool = False,
-                     before_line: tuple[float, float] | None = None):
+def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool = False):
     """A lawful vehicle on another approach to a junction of the ego's route, timed to reach the conflict
     point with the ego: whoever must yield has to (straight crossing paths, left turn across path). With
     ``keep``, only the conflicts (``Mutator._conflicts``' tuples) it accepts (:mod:`drivefuzz.search.aim`).
     With ``runs_red``, a driver who ignores its light (and every other rule), reaching the conflict point
     0.2-1.5 s after the ego: where the ego enters on yellow the cross stream's light is red, and a lawful car there
-    waits. With ``before_line`` [m] (low, high), it reaches the conflict point as the ego is that far before its
-    stop line instead (at the ego's red: it passes as the ego comes to the line, not after it waited)."""
+    waits."""
     options = mut._conflicts(sc)
     if keep is not None:
         options = [o for o in options if keep(o)]
@@ -241,11 +239,7 @@ def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool = False,
     free = [] if runs_red else [o for o in options if not _light_stops(
         mut, sc, o[2], o[3], mut._ego_eta(sc, o[1]) - o[4] / (0.8 * lane_limit(mut, o[2])))]
     i, s_c, lane_id, dest, d_c, node, _, _ = rng.choice(free or options)
-    if before_line is not None:
-        line = mut.rmap.route_length(mut._route(sc)[:i + 1], sc.mission.start_pos)
-        t_meet = mut._ego_eta(sc, max(line - rng.uniform(*before_line), 0.0))
-    else:
-        t_meet = mut._ego_eta(sc, s_c) + (rng.uniform(0.2, 1.5) if runs_red else rng.uniform(-1.0, 1.5))
+    t_meet = mut._ego_eta(sc, s_c) + (rng.uniform(0.2, 1.5) if runs_red else rng.uniform(-1.0, 1.5))
     speed = round(lane_limit(mut, lane_id) * rng.uniform(0.6, 1.0), 2)
     lane_len = mut.rmap.lane(lane_id).getLength()
     back = speed * max(t_meet, 0.5) - d_c

@@ -127,7 +127,7 @@ class RoutePlacement:
         key = (m.start_lane, m.start_pos, m.goal_edge, m.start_speed, tuple((x.tls, x.shift) for x in sc.signals))
         if key in self._profile_cache:
             return self._profile_cache[key]
-        seen = self._observed.get(key[:4])
+        seen = self._observed.get(_pace_key(m))
         s_route, t = self._model_profile(sc)
         if seen is not None and sc.signals:  # the run's pace, plus what the shifted lights change in the model
             _, plain = self._model_profile(sc.model_copy(update={"signals": ()}))
@@ -142,10 +142,9 @@ class RoutePlacement:
         test, no light shifted: scenarios of that mission are timed by it (:meth:`_ego_profile`)."""
         if sc.signals:  # its run waited at shifted lights: it says nothing of the mission's own
             return
-        m = sc.mission
-        key = (m.start_lane, m.start_pos, m.goal_edge, m.start_speed)
+        key = _pace_key(sc.mission)
         self._observed[key] = (np.asarray(travelled, dtype=float), every)
-        self._profile_cache = {k: v for k, v in self._profile_cache.items() if k[:4] != key}
+        self._profile_cache = {}
 
     def _model_profile(self, sc: Scenario) -> tuple[np.ndarray, np.ndarray]:
         m = sc.mission
@@ -423,6 +422,13 @@ def _coords(geom) -> list[tuple[float, float]]:
     if geom.geom_type == "Polygon":
         return list(geom.exterior.coords)
     return list(geom.coords)
+
+
+def _pace_key(m) -> tuple:
+    """What a run's pace is kept under: the mission less its start lane (a start on another lane of the same edge,
+    :func:`drivefuzz.search.aim_place.shifted_start`, drives the route at the pace of its seed: timed by the model
+    instead, its lineage lost the ADS's own pace), with its start speed (one that enters moving does not)."""
+    return m.start_edge, m.start_pos, m.goal_edge, m.start_speed
 
 
 def _observed_times(t_model: np.ndarray, travelled: np.ndarray, every: float) -> np.ndarray:
