@@ -107,6 +107,8 @@ def lane_change_moves(mut: Mutator, sc: Scenario) -> list[tuple[float, str, str,
     return out
 
 
+#: how a start on another lane says so (a job stops building them after a few misses: campaign/aiming.py)
+SHIFTED_START = "the ego starts on"
 #: [m] from the ego's start to its start edge's end that a start on another lane needs: the reference ADS changes
 #: lanes across the middle of what is left (ego/planning.py), done this far on at least 25 m before the stop line
 START_SHIFT_ROOM_M = 60.0
@@ -145,7 +147,7 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random) -> tuple[Scena
     if not options:
         return None
     new, lane_id = rng.choice(options)
-    return new, f"the ego starts on {lane_id} (was {m.start_lane}): its route makes it change lanes"
+    return new, f"{SHIFTED_START} {lane_id} (was {m.start_lane}): its route makes it change lanes"
 
 
 def started_at_speed(mut: Mutator, sc: Scenario, lo: float, hi: float,
