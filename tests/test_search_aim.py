@@ -185,6 +185,28 @@ def test_a_job_stops_aiming_at_lane_changes_once_its_ego_keeps_waiting_behind_st
     assert m.description.startswith(f"aim {lc1}: {BLOCKED_LANE}: "), m.description
 
 
+def test_a_job_stops_aiming_at_lane_changes_once_three_starts_on_another_lane_missed():
+    """A start on another lane makes any ADS change lanes; each lane-change cell it misses costs an execution (on
+    town's five seeds without a lane change of their own, every lane-change cell up to three times: the hidden fault
+    crossing_left_blind was then found in 5 of 10 campaigns). Three such misses end the job's lane-change aims, as
+    three waits behind a stopped car do."""
+    from drivefuzz.campaign.aiming import SHIFTED_MISS
+    from drivefuzz.search.aim_place import SHIFTED_START
+
+    lc1, lc2 = "party-manoeuvre:vehicle/behind|lane_change", "party-manoeuvre:vehicle/oncoming|lane_change"
+    other = "party-element:vehicle/ahead|edge"
+    shifted = {"mutation": f"aim {lc1}: {SHIFTED_START} NC_2 (was NC_1): its route makes it change lanes; "
+                           f"situation into_lane: v0", "cells": ["party-manoeuvre:vehicle/rear_right|lane_change"]}
+    hit = {"mutation": f"aim {lc2}: {SHIFTED_START} NC_2 (was NC_1): its route makes it change lanes; x",
+           "cells": [lc2]}
+    misses: dict[str, int] = {}
+    count_misses(misses, [shifted, shifted, hit])
+    assert misses[SHIFTED_MISS] == 2 and lc2 not in misses
+    assert aim_cells([lc1, lc2, other], set(), misses) == [lc1, lc2, other]
+    count_misses(misses, [shifted])
+    assert aim_cells([lc1, lc2, other], set(), misses) == [other]
+
+
 def test_a_campaign_shares_its_cells_among_its_seed_jobs(town_seeds):
     """Each reachable cell falls to exactly one job whose seed offers it, the shares are balanced, and every job
     computes the same shares alone (a pure function of the seeds). A job aims at its share first."""
