@@ -93,9 +93,9 @@ def aim_cells(reach, reached, misses: dict[str, int], own=()) -> list[str]:
     unreached = [c for c in reach if c not in reached]
     own = set(own)
     # a start on another lane makes any ADS change lanes, but each such cell it misses costs an execution: past
-    # AIM_MISSES of them the job leaves the lane-change cells (with the shifted start on every lane-change cell of
-    # town's five seeds without a lane change of their own, crossing_left_blind was found in 5 of 10 campaigns;
-    # without it, 4 of 5)
+    # AIM_MISSES of them the job leaves the lane-change cells (the shifted start on town's five seeds without a lane
+    # change of their own cost finding power: crossing_left_blind in 5 of 10 campaigns, 4 of 5 without any shifted
+    # start; with this rule still 3 of 5, docs/coverage.md)
     waits = misses.get(BLOCKED_MISS, 0) >= AIM_MISSES or misses.get(SHIFTED_MISS, 0) >= AIM_MISSES
     for cells in ([c for c in unreached if c in own], unreached):
         aim = [c for c in cells if misses.get(c, 0) < AIM_MISSES and not (waits and c.endswith("|lane_change"))]
