@@ -125,22 +125,17 @@ def _aimed_party(mut: Mutator, sc: Scenario, cell: str, row: str, col: str, rng:
     """``sc`` with a component built for the party x column ``cell``; ``sc`` itself (said why) when it cannot."""
     base, at, setup = meeting(mut, sc, col, rng)
     if col == "lane_change":
-        moves, shifted = lane_change_moves(mut, sc), None
+        on, moves = sc, lane_change_moves(mut, sc)
         if not moves:  # the route needs no lane change from the seed's start lane: start on one that needs it
             shifted = shifted_start(mut, sc, rng)
             if shifted is not None:
-                base, setup = shifted
-                moves = lane_change_moves(mut, base)
-        on = sc if shifted is None else base
+                on, setup = shifted
+                moves = lane_change_moves(mut, on)
         where, side = INTO_LANE.get(row, (None, None))
         fit = [m for m in moves if side in (None, m[1])]
         if where and fit:  # a car on the lane the ego changes into, where the cell wants it
             situation = Situation("into_lane", "", partial(into_lane, move=rng.choice(fit), where=where))
-            m = add_situation(mut, on, situation, rng)
-            if m.scenario is on:
-                return Mutation(sc, f"aim {cell}: {m.description}", m.retries)
-            what = f"{setup}; {m.description}" if setup else m.description
-            return Mutation(m.scenario, f"aim {cell}: {what}", m.retries)
+            return _built(mut, sc, on, cell, setup, situation, rng)
         base, at, setup = (on, rng.choice(moves)[0], setup) if moves else _blocked_lane(mut, sc, rng)
     if col in JUNCTION_COLUMNS + ("lane_change",) and at is None:
         return Mutation(sc, f"aim {cell}: the route has no place for it")
@@ -156,7 +151,14 @@ def _aimed_party(mut: Mutator, sc: Scenario, cell: str, row: str, col: str, rng:
         keep = partial(_near_place, mut, base, at)
     else:
         keep = _column_filter(mut, base, col)
-    m = add_situation(mut, base, _filtered(situation, keep), rng)
+    return _built(mut, sc, base, cell, setup, _filtered(situation, keep), rng)
+
+
+def _built(mut: Mutator, sc: Scenario, base: Scenario, cell: str, setup: str, situation: Situation,
+           rng: random.Random) -> Mutation:
+    """``situation`` added to ``base`` (``sc`` set up for the cell: ``setup`` says how), said as aimed at ``cell``;
+    ``sc`` itself, said why, when it cannot be built."""
+    m = add_situation(mut, base, situation, rng)
     if m.scenario is base:
         return Mutation(sc, f"aim {cell}: {m.description}", m.retries)
     what = f"{setup}; {m.description}" if setup else m.description
