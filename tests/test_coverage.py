@@ -246,13 +246,14 @@ def test_coverage_command_and_a_resume_sums_to_one_straight_run(tmp_path):
     ends = [r for r in ends if r.get("event") == "end" and r.get("risk") is not None]
     assert ends and all(not set(r["near"]) & set(r["cells"]) for r in ends)  # near: none of its own cells
     # the seed jobs' shares of the cells, written once for the campaign's later jobs and a resume
-    from drivefuzz.campaign.aiming import seed_reachable, can_aim, share_cells
+    from drivefuzz.campaign.aiming import can_aim, seed_places, share_cells
 
     manifest = json.loads((a / "manifest.json").read_text())
     seeds = [load_scenario(a / ref) for ref in manifest["seeds"]]
     rmap = load_roadmap(seeds[0].network_path())
+    places = [seed_places(rmap, sc) for sc in seeds]
     assert json.loads((a / "aim_shares.json").read_text()) == share_cells(
-        [seed_reachable(rmap, sc) for sc in seeds], lambda i, c: can_aim(rmap, seeds[i], c, i))
+        [list(p) for p in places], lambda i, c: can_aim(rmap, seeds[i], c, i), places)
     assert {c: h["count"] for c, h in cov["cells"].items() if h["count"]} == \
         {c: n for c, n in counts.items() if c in cov["cells"]}
     assert cov["reached"] == sum(1 for c in cov["cells"] if c in counts)

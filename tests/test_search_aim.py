@@ -297,6 +297,31 @@ def test_member_values_of_the_guided_feedbacks():
     assert member_value("paper", 0.5, 1.0, 3, 0.0) == pytest.approx(0.5)
 
 
+def test_a_cell_offered_at_several_junctions_is_shared_to_one_seed_per_junction(town_seeds):
+    """A cell is a class of encounters, and one junction of it is not the others: a cell that the seeds offer at
+    different junctions goes also to a seed that offers it at a junction the cell's other seeds do not (and that
+    can aim at it there), one per junction; a cell with no junction of its own (on an edge, speed x condition)
+    stays with one seed."""
+    from drivefuzz.campaign.aiming import can_aim, seed_places
+
+    plain = share_cells([["a", "b", "c"], ["b", "c"], ["b", "c"]])
+    places = [{"a": frozenset(), "b": frozenset({"J1"}), "c": frozenset()}, {"b": frozenset({"J2"}), "c": frozenset()},
+              {"b": frozenset({"J1"}), "c": frozenset()}]
+    split = share_cells([list(p) for p in places], None, places)
+    assert sum("b" in s for s in plain) == 1  # without places: one seed each
+    assert sum("b" in s for s in split) == 2 and "b" in split[1]  # J1 once (seed 0 or 2), J2 once (seed 1)
+    assert sum("c" in s for s in split) == 1 and "a" in split[0]
+    # town: a car from the left at a yield sign meets seed 001 at D1 and seed 002 at B0; both aim at it
+    rmap = load_roadmap(town_seeds[0].network_path())
+    places = [seed_places(rmap, sc) for sc in town_seeds]
+    cell = "party-element:vehicle/crossing_left|yield"
+    assert places[1][cell] == {"D1"} and places[2][cell] == {"B0"}
+    shares = share_cells([list(p) for p in places], lambda i, c: can_aim(rmap, town_seeds[i], c, i), places)
+    assert cell in shares[1] and cell in shares[2]
+    assert sum(cell in s for s in shares) == 2  # seed 006 offers it at D1 too (and cannot aim at it there)
+    assert sum("speed-condition:10-30 km/h|fog" in s for s in shares) == 1
+
+
 def test_the_shares_come_from_the_disk_cache_the_second_time(town_seeds, tmp_path, monkeypatch):
     """A campaign on the same seeds reads its cell shares from the cache of network-derived data: the same
     shares, without the aimed draws; a corrupt entry is computed again."""
@@ -305,8 +330,8 @@ def test_the_shares_come_from_the_disk_cache_the_second_time(town_seeds, tmp_pat
     monkeypatch.setenv("DRIVEFUZZ_CACHE", str(tmp_path))
     seeds = town_seeds[:3]
     rmap = load_roadmap(seeds[0].network_path())
-    want = share_cells([aiming.seed_reachable(rmap, sc) for sc in seeds],
-                       lambda i, c: aiming.can_aim(rmap, seeds[i], c, i))
+    places = [aiming.seed_places(rmap, sc) for sc in seeds]
+    want = share_cells([list(p) for p in places], lambda i, c: aiming.can_aim(rmap, seeds[i], c, i), places)
     assert aiming.cached_shares(rmap, seeds) == want
     (entry,) = tmp_path.glob("*.npz")
     monkeypatch.setattr(aiming, "can_aim", lambda *a: pytest.fail("the cached shares were built again"))

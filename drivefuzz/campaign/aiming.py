@@ -24,36 +24,59 @@ BLOCKED_MISS = "lane_change around a stopped car"
 SHIFTED_MISS = "lane_change on a start on another lane"
 
 
-_REACH: dict[tuple, list[str]] = {}
+_REACH: dict[tuple, dict[str, frozenset[str]]] = {}
 
 
-def seed_reachable(rmap, seed_sc) -> list[str]:
-    """The interaction-coverage cells the seed's network and route offer (cached per process)."""
-    from drivefuzz.triage.coverage import reachable
+def seed_places(rmap, seed_sc) -> dict[str, frozenset[str]]:
+    """The interaction-coverage cells the seed's network and route offer, with the junctions where the route
+    offers each (:func:`drivefuzz.triage.coverage.reachable_places`; cached per process)."""
+    from drivefuzz.triage.coverage import reachable_places
 
     key = (str(rmap.path), seed_sc.mission.start_lane, seed_sc.mission.start_pos, seed_sc.mission.goal_edge)
     if key not in _REACH:
-        _REACH[key] = reachable(rmap, [seed_sc])
+        _REACH[key] = reachable_places(rmap, [seed_sc])
     return _REACH[key]
 
 
-def share_cells(reaches: list[list[str]], builds: Callable[[int, str], bool] | None = None) -> list[list[str]]:
+def seed_reachable(rmap, seed_sc) -> list[str]:
+    """The interaction-coverage cells the seed's network and route offer (sorted keys; cached per process)."""
+    return list(seed_places(rmap, seed_sc))
+
+
+def share_cells(reaches: list[list[str]], builds: Callable[[int, str], bool] | None = None,
+                places: list[dict[str, frozenset[str]]] | None = None) -> list[list[str]]:
     """Each seed job's share of the campaign's reachable cells: every cell goes to one of the seeds that offer it
     (``reaches[i]``: seed i's cells), the cells fewest seeds offer first, each to the offering seed with the
     smallest share so far (the lower index on a tie) among those whose mission the mutator can aim at it
     (``builds(i, cell)``, :func:`can_aim`; where none can, among all). A pure function of the seeds, so every job
     computes the same shares alone, without hearing from the others (they run in parallel: a campaign-wide count
     of what was reached would make a job's draws depend on the others' timing). Without it every job aims at all
-    its seed's cells, and eight town jobs aim at the same ~80 unreached cells, each a few times."""
+    its seed's cells, and eight town jobs aim at the same ~80 unreached cells, each a few times.
+
+    With ``places`` (seed i's cells with the junctions where its route offers each, :func:`seed_places`), a cell
+    that seeds offer at different junctions goes also to a seed that can aim at it at a junction none of the
+    cell's seeds so far has, until every such junction has one: a cell is a class of encounters, and one junction
+    of it is not the others (on town a car from the left at a yield sign is offered by seed 001 at D1 and by seed
+    002 at B0; it went to seed 001 alone, was reached at D1, and never aimed at B0, where the hidden fault
+    ``crossing_left_blind`` collides)."""
     offered: dict[str, list[int]] = {}
     for i, cells in enumerate(reaches):
         for c in cells:
             offered.setdefault(c, []).append(i)
     shares: list[list[str]] = [[] for _ in reaches]
+    holder: dict[str, int] = {}
     for c in sorted(offered, key=lambda c: (len(offered[c]), c)):
         order = sorted(offered[c], key=lambda i: (len(shares[i]), i))
-        i = next((i for i in order if builds is None or builds(i, c)), order[0])
+        i = holder[c] = next((i for i in order if builds is None or builds(i, c)), order[0])
         shares[i].append(c)
+    if places is not None:
+        for c in sorted(offered, key=lambda c: (len(offered[c]), c)):
+            seen = set(places[holder[c]].get(c, ()))
+            for i in sorted(offered[c], key=lambda i: (len(shares[i]), i)):
+                new = places[i].get(c, frozenset()) - seen
+                if i != holder[c] and new and (builds is None or builds(i, c)):
+                    shares[i].append(c)
+                    seen |= new
     return [sorted(s) for s in shares]
 
 
@@ -95,7 +118,7 @@ def aim_cells(reach, reached, misses: dict[str, int], own=()) -> list[str]:
     # a start on another lane makes any ADS change lanes, but each such cell it misses costs an execution: past
     # AIM_MISSES of them the job leaves the lane-change cells (the shifted start on town's five seeds without a lane
     # change of their own cost finding power: crossing_left_blind in 5 of 10 campaigns, 4 of 5 without any shifted
-    # start; with this rule still 3 of 5, docs/coverage.md)
+    # start; with this rule still 3 of 5; with a cell aimed at each of its junctions, 8 of 10: docs/coverage.md)
     waits = misses.get(BLOCKED_MISS, 0) >= AIM_MISSES or misses.get(SHIFTED_MISS, 0) >= AIM_MISSES
     for cells in ([c for c in unreached if c in own], unreached):
         aim = [c for c in cells if misses.get(c, 0) < AIM_MISSES and not (waits and c.endswith("|lane_change"))]
@@ -157,8 +180,8 @@ def cached_shares(rmap, seeds: list) -> list[list[str]]:
             return shares
         except (ValueError, IndexError):
             pass
-    reaches = [seed_reachable(rmap, sc) for sc in seeds]
-    shares = share_cells(reaches, lambda i, c: can_aim(rmap, seeds[i], c, i))
+    places = [seed_places(rmap, sc) for sc in seeds]
+    shares = share_cells([list(p) for p in places], lambda i, c: can_aim(rmap, seeds[i], c, i), places)
     netcache.store(key, {"cells": np.array([f"{i}\t{c}" for i, cells in enumerate(shares) for c in cells] or [""])})
     return shares
 

@@ -60,7 +60,8 @@ from pathlib import Path
 from typing import Any, Callable
 
 import drivefuzz
-from drivefuzz.campaign.aiming import aim_cells, cached_shares, can_aim, count_misses, seed_reachable, share_cells
+from drivefuzz.campaign.aiming import (aim_cells, cached_shares, can_aim, count_misses, seed_places, seed_reachable,
+                                      share_cells)
 from drivefuzz.campaign.config import FuzzConfig
 from drivefuzz.oracle import Misbehavior
 from drivefuzz.storage import atomic_write_json, atomic_write_text
@@ -286,7 +287,7 @@ class SeedJob:
         # come before any execution not yet run, so a resumed job avoids exactly what the first run avoided
         executed = {r["effect"] for r in done.values() if r.get("effect")} | {effect_hash(seed_sc)}
         reach = seed_reachable(mutator.rmap, seed_sc) if cfg.feedback in GUIDED else ()
-        own = self._own_cells(mutator.rmap, reach) if reach else ()
+        own = self._own_cells(mutator.rmap) if reach else ()
         misses: dict[str, int] = dict(ckpt.get("aim_misses") or {})  # per cell: aimed builds that missed it
 
         while True:
@@ -342,7 +343,7 @@ class SeedJob:
                 return mut, eff, redraw
         return None
 
-    def _own_cells(self, rmap, reach) -> list[str]:
+    def _own_cells(self, rmap) -> list[str]:
         """The cells of :func:`share_cells` that fall to this job, from the manifest's seeds (all of one network
         in a campaign; a seed on another network offers none of this one's cells). Every job reads the same seed
         files, so all compute the same shares; the first to finish writes them to the campaign folder
@@ -362,9 +363,8 @@ class SeedJob:
             shares = cached_shares(rmap, seeds)
             atomic_write_json(path, shares)
             return shares[self.si]
-        reaches = [(reach if i == self.si else seed_reachable(rmap, sc)) if ok else []
-                   for i, (sc, ok) in enumerate(zip(seeds, same))]
-        return share_cells(reaches, lambda i, c: can_aim(rmap, seeds[i], c, i))[self.si]
+        places = [seed_places(rmap, sc) if ok else {} for sc, ok in zip(seeds, same)]
+        return share_cells([list(p) for p in places], lambda i, c: can_aim(rmap, seeds[i], c, i), places)[self.si]
 
     def _select(self, members: list[tuple[dict[str, Any], Any]], schedule, rng: random.Random):
         """(corpus folder, riskiest actor, feedback value) of the member that becomes the next scenario, or

@@ -279,7 +279,17 @@ def _features(rmap) -> dict[str, frozenset[str]]:
 
 
 def reachable(rmap, scenarios: Iterable) -> list[str]:
-    """The cells that the network of ``rmap`` and these seeds' routes can offer (sorted keys).
+    """The cells that the network of ``rmap`` and these seeds' routes can offer (sorted keys); the keys of
+    :func:`reachable_places`."""
+    return sorted(reachable_places(rmap, scenarios))
+
+
+def reachable_places(rmap, scenarios: Iterable) -> dict[str, frozenset[str]]:
+    """Every cell that the network of ``rmap`` and these seeds' routes can offer, with the junctions (node ids)
+    where the routes offer it: a party at a junction's control or in a turn there; the other cells (on an edge,
+    a ring or a ramp, the manoeuvres that happen anywhere, speed x condition) have no junction of their own
+    (an empty set). The aiming shares a cell that several seeds offer at different junctions among them
+    (:func:`drivefuzz.campaign.aiming.share_cells`).
 
     Per *place* of a route (an edge, and the junction at its end with the link the route takes): its element,
     its turn, and the parties that can meet the ego there (sides only on a multi-lane edge, oncoming only with
@@ -289,31 +299,47 @@ def reachable(rmap, scenarios: Iterable) -> list[str]:
     route; a lane change, the parties of its multi-lane edges and their junctions."""
     places = _route_places(rmap, scenarios)
     if not places:
-        return []
+        return {}
+    cells: dict[str, set[str]] = {}
+
+    def offer(key: str, node: str | None = None) -> None:
+        at = cells.setdefault(key, set())
+        if node:
+            at.add(node)
+
     anywhere = set().union(*(p["parties"] for p in places))
-    pm: set[tuple[str, str]] = {(p, m) for p in anywhere for m in ("cruise", "accelerate", "brake", "stop_go")}
-    pe: set[tuple[str, str]] = set()
+    for p in anywhere:
+        for m in ("cruise", "accelerate", "brake", "stop_go"):
+            offer(f"party-manoeuvre:{p}|{m}")
     for pl in places:
         parties = pl["parties"]
         roadside = {p for p in parties if not p.startswith("vehicle/crossing")}  # crossing traffic meets at junctions
-        pe.update((p, "edge") for p in roadside)
-        if pl["element"]:
-            pe.update((p, e) for p in (roadside if pl["element"] == "ramp" else parties)
-                      for e in _phases(pl["element"]))
+        for p in roadside:
+            offer(f"party-element:{p}|edge")
+        if pl["element"]:  # a ring or a ramp is its own place, a control is its junction's
+            node = pl["node"] if pl["element"] not in ("ramp", "roundabout") else None
+            for p in (roadside if pl["element"] == "ramp" else parties):
+                for e in _phases(pl["element"]):
+                    offer(f"party-element:{p}|{e}", node)
         if pl["turn"]:
-            pm.update((p, pl["turn"]) for p in parties)
+            for p in parties:
+                offer(f"party-manoeuvre:{p}|{pl['turn']}", pl["node"])
         if pl["multilane"]:  # a lane change on the approach, then whoever meets the ego at its junction
-            pm.update((p, "lane_change") for p in parties)
+            for p in parties:
+                offer(f"party-manoeuvre:{p}|lane_change")
         if pl["element"] == "ramp":
-            pm.update((p, "merge") for p in roadside)
+            for p in roadside:
+                offer(f"party-manoeuvre:{p}|merge")
         if pl["element"] == "roundabout":  # traffic entering the ring meets the ego across its path
-            pm.update((p, "roundabout") for p in parties)
-    cells = [f"party-manoeuvre:{p}|{m}" for p, m in pm] + [f"party-element:{p}|{e}" for p, e in pe]
+            for p in parties:
+                offer(f"party-manoeuvre:{p}|roundabout")
     vmax = max(pl["vmax"] for pl in places)
     bands = [name for top, name in SPEED_BANDS]
     bands = bands[:next(i for i, (top, _) in enumerate(SPEED_BANDS) if vmax * 1.1 < top) + 1]
-    cells += [f"speed-condition:{b}|{c}" for b in bands for c in CONDITIONS]
-    return sorted(cells)
+    for b in bands:
+        for c in CONDITIONS:
+            offer(f"speed-condition:{b}|{c}")
+    return {key: frozenset(at) for key, at in sorted(cells.items())}
 
 
 def _phases(element: str) -> tuple[str, ...]:
@@ -323,8 +349,8 @@ def _phases(element: str) -> tuple[str, ...]:
 
 def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
     """Per route edge of every seed: its element at the end (``signal``, ``priority``, ``yield``; ``ramp`` or
-    ``roundabout`` for such an edge; None for a plain edge's end), its turn there, whether it is multi-lane,
-    its limit, and the parties that can meet the ego there."""
+    ``roundabout`` for such an edge; None for a plain edge's end), its turn there, the junction there (``node``),
+    whether it is multi-lane, its limit, and the parties that can meet the ego there."""
     feats = _features(rmap)
     out: list[dict[str, Any]] = []
     done: set[tuple[str, str]] = set()
@@ -355,7 +381,7 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
                 parties |= {f"pedestrian/{a}" for a in PEDESTRIAN_APPROACHES}
             element = ("roundabout" if eid in feats["ring_edges"] else "ramp" if eid in feats["ramp_edges"] else None)
             vmax = max((ln.getSpeed() for ln in drive), default=0.0)
-            base = {"multilane": multilane, "vmax": vmax, "parties": parties}
+            base = {"multilane": multilane, "vmax": vmax, "parties": parties, "node": node.getID()}
             if element:  # a ring or ramp edge: its own element (and the manoeuvre it implies), no turns
                 if not sidewalk:  # nobody walks on a ring or a ramp without a pavement
                     base["parties"] = {p for p in parties if not p.startswith("pedestrian/")}
