@@ -86,7 +86,7 @@ def test_journal_is_fsynced_before_each_checkpoint_not_per_record(tmp_path, town
 
 
 def test_warm_worker_leaves_a_started_host_that_the_first_job_adopts(town_scenario):
-    from drivefuzz.campaign import job
+    from drivefuzz.campaign import hosts
     from drivefuzz.sim.simhost import OK
 
     import threading
@@ -94,15 +94,15 @@ def test_warm_worker_leaves_a_started_host_that_the_first_job_adopts(town_scenar
     got: dict = {}
 
     def in_a_new_thread():  # a thread of its own, as a Dask worker's task thread: no host of its own yet
-        job.warm_worker()
-        spare = job._SPARE[-1]
+        hosts.warm_worker()
+        spare = hosts._SPARE[-1]
         got["alive"] = spare.proc is not None and spare.proc.poll() is None
         got["starts"] = spare.starts
-        host = job._host_for_this_thread(60.0)
+        host = hosts._host_for_this_thread(60.0)
         got["adopted"] = host is spare
         got["status"] = host.execute(town_scenario.model_copy(update={"sim": SimOptions(time_limit=3.0)})).status
         got["restarted"] = host.starts != got["starts"]
-        job._HOSTS.pop(threading.get_ident()).close()
+        hosts._HOSTS.pop(threading.get_ident()).close()
 
     t = threading.Thread(target=in_a_new_thread)
     t.start()
@@ -120,9 +120,9 @@ def test_local_workers_are_warm_and_quiet_before_their_first_job():
 
         import dask as d
 
-        from drivefuzz.campaign import job as j
+        from drivefuzz.campaign import hosts
 
-        return {"spare": [h.proc.poll() is None for h in j._SPARE], "scipy": "scipy.signal" in sys.modules,
+        return {"spare": [h.proc.poll() is None for h in hosts._SPARE], "scipy": "scipy.signal" in sys.modules,
                 **{k: d.config.get(k) for k in DASK_SETTINGS}}
 
     with dask_client("local", jobs=1) as client:

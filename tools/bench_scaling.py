@@ -465,7 +465,7 @@ def main() -> None:
     if max(counts) > (cores or 1):
         print(f"NOTE: {max(counts)} jobs on {cores} cores: the jobs share cores, efficiency falls below 1 by design")
     # this process runs the one-job points: warm it as a local cluster's workers are warmed before they register
-    from drivefuzz.campaign.job import warm_worker
+    from drivefuzz.campaign.hosts import warm_worker
 
     warm_worker()
     workdir = Path(tempfile.mkdtemp(prefix="bench-scaling-"))

@@ -158,7 +158,7 @@ def dask_setup(worker) -> None:
     """Worker preload (``distributed.worker.preload``): a terminal's Ctrl-C reaches every process in the
     foreground group, but only the campaign process decides how a campaign stops. And the worker readies
     itself for seed jobs (imports, a simulation host) before it registers, as part of the cluster's start-up
-    (:func:`drivefuzz.campaign.job.warm_worker`)."""
+    (:func:`drivefuzz.campaign.hosts.warm_worker`)."""
     import logging
     import signal
     import threading
@@ -169,7 +169,7 @@ def dask_setup(worker) -> None:
     # falls in between logs the lost connection as an error with a traceback on the user's terminal (CI saw it
     # once after a Ctrl-C). Nothing is lost then (the campaign has stopped its jobs), so that one record is dropped.
     logging.getLogger("distributed.worker").addFilter(_HeartbeatAfterClose())
-    from drivefuzz.campaign.job import warm_worker
+    from drivefuzz.campaign.hosts import warm_worker
 
     warm_worker()
 
