@@ -318,7 +318,7 @@ def test_a_cell_offered_at_several_junctions_is_shared_to_one_seed_per_junction(
     assert places[1][cell] == {"D1"} and places[2][cell] == {"B0"}
     shares = share_cells([list(p) for p in places], lambda i, c: can_aim(rmap, town_seeds[i], c, i), places)
     assert cell in shares[1] and cell in shares[2]
-    assert sum(cell in s for s in shares) == 2  # seed 006 offers it at D1 too (and cannot aim at it there)
+    assert sum(cell in s for s in shares) == 2  # seed 006 offers it at D1 too, where seed 001 has it already
     assert sum("speed-condition:10-30 km/h|fog" in s for s in shares) == 1
 
 
