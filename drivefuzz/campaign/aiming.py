@@ -65,12 +65,13 @@ def share_cells(reaches: list[list[str]], builds: Callable[[int, str], bool] | N
             offered.setdefault(c, []).append(i)
     shares: list[list[str]] = [[] for _ in reaches]
     holder: dict[str, int] = {}
-    for c in sorted(offered, key=lambda c: (len(offered[c]), c)):
+    rarest_first = sorted(offered, key=lambda c: (len(offered[c]), c))
+    for c in rarest_first:
         order = sorted(offered[c], key=lambda i: (len(shares[i]), i))
         i = holder[c] = next((i for i in order if builds is None or builds(i, c)), order[0])
         shares[i].append(c)
     if places is not None:
-        for c in sorted(offered, key=lambda c: (len(offered[c]), c)):
+        for c in rarest_first:
             seen = set(places[holder[c]].get(c, ()))
             for i in sorted(offered[c], key=lambda i: (len(shares[i]), i)):
                 new = places[i].get(c, frozenset()) - seen
@@ -78,6 +79,12 @@ def share_cells(reaches: list[list[str]], builds: Callable[[int, str], bool] | N
                     shares[i].append(c)
                     seen |= new
     return [sorted(s) for s in shares]
+
+
+def shares_by_place(rmap, seeds: list, places: list[dict[str, frozenset[str]]]) -> list[list[str]]:
+    """:func:`share_cells` of ``seeds`` by :func:`can_aim`, each cell at each of its junctions (``places[i]``:
+    :func:`seed_places` of seed i, empty for a seed on another network)."""
+    return share_cells([list(p) for p in places], lambda i, c: can_aim(rmap, seeds[i], c, i), places)
 
 
 #: draws of an aimed build per (seed, cell) before :func:`can_aim` says no
@@ -180,8 +187,7 @@ def cached_shares(rmap, seeds: list) -> list[list[str]]:
             return shares
         except (ValueError, IndexError):
             pass
-    places = [seed_places(rmap, sc) for sc in seeds]
-    shares = share_cells([list(p) for p in places], lambda i, c: can_aim(rmap, seeds[i], c, i), places)
+    shares = shares_by_place(rmap, seeds, [seed_places(rmap, sc) for sc in seeds])
     netcache.store(key, {"cells": np.array([f"{i}\t{c}" for i, cells in enumerate(shares) for c in cells] or [""])})
     return shares
 

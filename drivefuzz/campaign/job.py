@@ -59,8 +59,8 @@ import uuid
 from pathlib import Path
 from typing import Any, Callable
 
-from drivefuzz.campaign.aiming import (aim_cells, cached_shares, can_aim, count_misses, seed_places, seed_reachable,
-                                      share_cells)
+from drivefuzz.campaign.aiming import (aim_cells, cached_shares, count_misses, seed_places, seed_reachable,
+                                      shares_by_place)
 from drivefuzz.campaign.config import FuzzConfig
 from drivefuzz.campaign.hosts import Runner, warm_up
 from drivefuzz.oracle import Misbehavior
@@ -364,7 +364,7 @@ class SeedJob:
             atomic_write_json(path, shares)
             return shares[self.si]
         places = [seed_places(rmap, sc) if ok else {} for sc, ok in zip(seeds, same)]
-        return share_cells([list(p) for p in places], lambda i, c: can_aim(rmap, seeds[i], c, i), places)[self.si]
+        return shares_by_place(rmap, seeds, places)[self.si]
 
     def _select(self, members: list[tuple[dict[str, Any], Any]], schedule, rng: random.Random):
         """(corpus folder, riskiest actor, feedback value) of the member that becomes the next scenario, or
