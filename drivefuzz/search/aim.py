@@ -382,7 +382,7 @@ def _crossing(mut, sc, rng, want: str, col: str, at: float | None = None):
 
     # where the ego enters on yellow, a lawful car on the cross road waits at its red: one that runs it meets the ego
     # (at the ego's red the reference ADS waits, and enters at green: a red runner then met it at green)
-    return cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=col == "signal/amber")
+    return cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=col == "signal/amber", whole=True)
 
 
 def _end_heading(edge) -> float:

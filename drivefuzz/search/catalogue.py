@@ -221,14 +221,18 @@ def walker_crosses(mut, sc, rng, early=(0.0, 4.0), at: float | None = None):
     return [a], [], {}, f"{a.id} crosses at {spot.lane} @ {spot.pos:.1f} m, leaving at {depart} s"
 
 
-def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool = False):
+def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool = False, whole: bool = False):
     """A lawful vehicle on another approach to a junction of the ego's route, timed to reach the conflict
     point with the ego: whoever must yield has to (straight crossing paths, left turn across path). With
     ``keep``, only the conflicts (``Mutator._conflicts``' tuples) it accepts (:mod:`drivefuzz.search.aim`).
     With ``runs_red``, a driver who ignores its light (and every other rule), reaching the conflict point
     0.2-1.5 s after the ego: where the ego enters on yellow the cross stream's light is red, and a lawful car there
-    waits."""
-    options = mut._conflicts(sc)
+    waits. With ``whole``, at the junctions of the whole route, not only within ``conflict_range``, and a car that
+    would drive longer than :data:`LATE_RUN_UP_S` to the conflict departs later, that long before it meets the ego
+    (a junction reached after some 60 s needs 400 m of road upstream on the cross approach otherwise: walked back
+    at random through the junctions before it, such a start was on the ego's own route on town's seed 005, where
+    the car waited at a light ahead of the ego and never came to the junction it was timed for)."""
+    options = mut._conflicts(sc, whole=whole)
     if keep is not None:
         options = [o for o in options if keep(o)]
     # where some can, a car whose light lets it through when the ego comes (at a signalised crossing the cross
@@ -243,17 +247,29 @@ def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool = False):
     speed = round(lane_limit(mut, lane_id) * rng.uniform(0.6, 1.0), 2)
     lane_len = mut.rmap.lane(lane_id).getLength()
     back = speed * max(t_meet, 0.5) - d_c
-    placed = mut._upstream(lane_id, lane_len, back, rng) if back > 0 else None
+    depart = 0.0
+    if whole and back > speed * LATE_RUN_UP_S[1]:  # it enters later, a run-up before the meeting (at full speed)
+        run = speed * rng.uniform(*LATE_RUN_UP_S) - d_c
+        placed = mut._upstream(lane_id, lane_len, run, rng) if run > 0 else None
+        depart = round(t_meet - (placed[2] + d_c) / speed, 1) if placed is not None else 0.0
+        if depart <= 0.0:
+            return None
+    else:
+        placed = mut._upstream(lane_id, lane_len, back, rng) if back > 0 else None
     if placed is None:
         return None
     lane, pos, _ = placed
     route = mut.rmap.route(mut.rmap.lane(lane).getEdge().getID(), dest)
-    if not route:
-        return None
+    if not route or (whole and mut.rmap.lane(lane_id).getEdge().getID() not in route):
+        return None  # (with whole: a run-up upstream whose way to dest does not come through the conflict)
     a = Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.LINEAR if runs_red else NavType.AUTOPILOT,
-              start_lane=lane, start_pos=pos, speed=speed, dest_edge=dest)
+              start_lane=lane, start_pos=pos, speed=speed, dest_edge=dest, depart=depart)
     how = ", running its red" if runs_red else ""
     return [a], [], {}, f"{a.id} meets the ego at junction {node} at ~{t_meet:.1f} s ({speed:.1f} m/s{how})"
+
+
+#: [s] of driving before it meets the ego, for a crossing car that enters later (:func:`crossing_traffic`)
+LATE_RUN_UP_S = (4.0, 8.0)
 
 
 #: link states at which a lawful driver arriving at the stop line stops (red, red-yellow; at yellow it may go on)

@@ -65,6 +65,22 @@ class RoutePlacement:
         at = self.lane_change_at(sc, i)
         return entry if at is not None and pos < at else lane
 
+    def ego_connection(self, sc: Scenario, i: int) -> tuple[str, str, str] | None:
+        """(from lane, to lane, via) of the connection the ego takes from route edge ``i`` to the next: out of the
+        lane it drives there (:meth:`ego_lane`) into the lane it enters the next edge by; None at the route's end
+        or where the edges do not connect. (The junction passage used to be the connection nearest the start
+        lane's index: on town's B3 the ego comes out of its left turn at C3 on the left lane, where the side road's
+        left turners merge, but the passage was looked for on the right lane, and no crossing car could be aimed
+        at B3.)"""
+        route = self._route(sc)
+        conns = self.rmap.connections(route[i], route[i + 1]) if i + 1 < len(route) else []
+        if not conns:
+            return None
+        lane, into = self.ego_lane(sc, i), self.ego_entry_lane(sc, i + 1)
+        mine = [c for c in conns if c[0] == lane] or conns
+        index = self.rmap.lane(lane).getIndex()
+        return min(mine, key=lambda c: (c[1] != into, abs(self.rmap.lane(c[0]).getIndex() - index)))
+
     def _lane_keeping(self, sc: Scenario) -> list[tuple[str, str]]:
         """Per route edge (the lane the ego enters it by, the lane it drives on to the next)."""
         key = (sc.mission.start_lane, sc.mission.goal_edge)
@@ -150,8 +166,6 @@ class RoutePlacement:
         m = sc.mission
         cfg, rmap, route = self.cfg, self.rmap, self._route(sc)
         caps: list[np.ndarray] = []
-        lane = m.start_lane
-        index = rmap.lane(lane).getIndex()
         ds: list[np.ndarray] = []  # per step, the route distance it adds (an edge's metres; ~0 in a junction)
         lights: list[tuple[int, str, int]] = []  # (step index of the stop line, tls, the ego's link index)
         for i, e in enumerate(route):
@@ -159,10 +173,10 @@ class RoutePlacement:
             caps.append(np.full(max(int(length), 1), cfg.ego_speed_share * rmap.edge(e).getSpeed()))
             ds.append(np.full(len(caps[-1]), max(length, 0.0) / len(caps[-1])))
             if i + 1 < len(route):
-                conns = rmap.connections(e, route[i + 1])
-                if not conns:
+                passage = self.ego_connection(sc, i)
+                if passage is None:
                     continue
-                fl, _tl, via = min(conns, key=lambda c: abs(rmap.lane(c[0]).getIndex() - index))
+                fl, _tl, via = passage
                 conn = next((c for c in rmap.lane(fl).getOutgoing() if c.getToLane().getID() == _tl), None)
                 if conn is not None and conn.getTLSID() and shiftable(str(rmap.path), conn.getTLSID()) is not None:
                     lights.append((sum(len(c) for c in caps), conn.getTLSID(), conn.getTLLinkIndex()))
@@ -312,28 +326,28 @@ class RoutePlacement:
         pts.append(self.rmap.geom(to_lane).position(min(15.0, g.length))[:2])
         return LineString(pts)
 
-    def _conflicts(self, sc: Scenario) -> list[tuple[int, float, str, str, float, str, str, str]]:
-        """Ways to cross the ego's path at the junctions of its route within ``conflict_range``:
+    def _conflicts(self, sc: Scenario, whole: bool = False) -> list[tuple[int, float, str, str, float, str, str, str]]:
+        """Ways to cross the ego's path at the junctions of its route within ``conflict_range`` (along all of it
+        with ``whole``: an aim at a junction's cell; on town seed 000's priority junction B3 lies 289 m on):
         (route index of the junction's incoming edge, ego distance [m] from its start to the conflict point,
         actor lane entering the junction, actor destination edge, actor distance [m] from that lane's end to
         the conflict point, junction id, the ego's and the actor's link states: 'M' major, 'm' minor, 's'
         stop, 'w' all-way stop, 'o' signalised...). Cached per mission."""
         m = sc.mission
-        key = (m.start_lane, m.start_pos, m.goal_edge)
+        key = (m.start_lane, m.start_pos, m.goal_edge, whole)
         if key in self._conflict_cache:
             return self._conflict_cache[key]
         rmap, route = self.rmap, self._route(sc)
         out = []
         s = -m.start_pos
-        ego_index = self.rmap.lane(m.start_lane).getIndex()
         for i, e in enumerate(route[:-1]):
             s += rmap.edge(e).getLength()
-            if s > self.cfg.conflict_range:
+            if s > self.cfg.conflict_range and not whole:
                 break
-            conns = rmap.connections(e, route[i + 1])
-            if not conns:
+            passage = self.ego_connection(sc, i)
+            if passage is None:
                 continue
-            fl, tl, via = min(conns, key=lambda c: abs(rmap.lane(c[0]).getIndex() - ego_index))
+            fl, tl, via = passage
             ego_state = next((c.getState() for c in rmap.lane(fl).getOutgoing() if c.getToLane().getID() == tl), "")
             ego_line = self._passage(fl, tl, via)
             via_len = sum(rmap.geom(lid).length for lid in self._internal_chain(via))
