@@ -222,7 +222,8 @@ def test_a_campaign_shares_its_cells_among_its_seed_jobs(town_seeds):
     # a cell one seed alone offers goes to that seed
     assert share_cells([["a", "b"], ["b"], ["b", "c"]]) == [["a"], ["b"], ["c"]]
     # a cell goes to a seed whose mission the mutator can aim at it, where one can (before, 54 of the 185 went to
-    # one that cannot: a car from the right at a yield sign to seed 005, whose A2 has no road from the right)
+    # one that cannot: a car from the right at a green light to seed 000, whose one light, C2, has none that its
+    # green lets through when the ego comes)
     from drivefuzz.campaign.aiming import can_aim
 
     built = share_cells(reaches, lambda i, c: can_aim(rmap, town_seeds[i], c, i))
@@ -231,8 +232,9 @@ def test_a_campaign_shares_its_cells_among_its_seed_jobs(town_seeds):
     assert all(not can_aim(rmap, town_seeds[i], c, i) for c in stuck for i, r in enumerate(reaches) if c in r)
     assert len(stuck) <= 15 and sum(not can_aim(rmap, town_seeds[i], c, i) for c, i in
                                     {c: i for i, cells in enumerate(shares) for c in cells}.items()) >= 40
-    cell = "party-element:vehicle/crossing_right|yield"
-    assert not can_aim(rmap, town_seeds[5], cell, 5) and cell in shares[5] and cell in built[2]
+    cell = "party-element:vehicle/crossing_right|signal/green"
+    assert not can_aim(rmap, town_seeds[0], cell, 0) and cell in shares[0] and cell in built[4]
+    assert can_aim(rmap, town_seeds[4], cell, 4)
 
     a, b, c = "party-element:vehicle/ahead|edge", "party-manoeuvre:vehicle/behind|brake", "speed-condition:0-10 km/h|fog"
     assert aim_cells([a, b, c], set(), {}, own=[c]) == [c]
@@ -260,6 +262,34 @@ def test_a_crossing_car_is_timed_where_its_light_lets_it_through(mut, town_seeds
     # seed 000 crosses at C2 alone, signalised: a crossing car is built there still
     built = [cat.crossing_traffic(mut, town_seeds[0], random.Random(k)) for k in range(12)]
     assert any(b and " at junction C2 " in b[3] for b in built)
+
+
+def test_a_crossing_car_is_aimed_at_a_junction_far_along_the_route_on_the_lane_the_ego_drives(mut, town_seeds):
+    """Seed 000 turns left at C3 onto the left lane of C3B3 and crosses the priority junction B3 289 m on. The
+    passage was looked for on the lane of the start's index (the right one) and only within ``conflict_range``
+    (160 m): no crossing car could be aimed at B3. Now the passage is the ego's own lane's, an aim sees the whole
+    route, and a car that would drive longer than 8 s to the conflict departs later, on the approach that leads
+    it there; one of six aimed builds meets the ego at B3 in a real run."""
+    from drivefuzz.search import catalogue as cat
+
+    sc = town_seeds[0]
+    assert mut._route(sc)[2:] == ("C3B3", "B3A3")
+    assert mut.ego_connection(sc, 2)[:2] == ("C3B3_2", "B3A3_2")
+    assert "B3" not in {o[5] for o in mut._conflicts(sc)} and "B3" in {o[5] for o in mut._conflicts(sc, whole=True)}
+    cell = "party-element:vehicle/crossing_left|priority"
+    builds = [_aim(mut, sc, cell, start=k)[0] for k in range(6)]
+    assert all(" at junction B3 " in m.description for m in builds), [m.description for m in builds]
+    for m in builds:
+        a = m.scenario.actors[-1]
+        t_meet = float(m.description.split(" at ~")[1].split(" s")[0])
+        assert 0.0 < a.depart and cat.LATE_RUN_UP_S[0] - 1.0 <= t_meet - a.depart <= cat.LATE_RUN_UP_S[1] + 1.0
+        way = mut.rmap.route(mut.rmap.lane(a.start_lane).getEdge().getID(), a.dest_edge)
+        assert any(mut.rmap.edge(e).getToNode().getID() == "B3" for e in way) and "C3B3" not in way
+    reached = []
+    for m in builds:
+        ex = execute(m.scenario, oracles=OracleSettings().instantiate())
+        reached.append(cell in execution_cells(m.scenario, ex.trace, mut.rmap, risk_score(ex.trace)))
+    assert any(reached)
 
 
 def test_an_oncoming_car_aimed_at_a_place_comes_by_there(mut, town_seeds):

@@ -13,7 +13,8 @@ over the cells its network and seeds offer (:func:`drivefuzz.triage.coverage.rea
 and shrinking are off: they do not change coverage, only the wall time.
 
 Printed: per network the reachable cells, per configuration the share reached in each repetition, its mean,
-and Mann-Whitney U's two-sided p of ``risk`` against ``random``; with ``--faults``, the executions to the
+and Mann-Whitney U's two-sided p of ``risk`` against ``random``, then the union over the repetitions and how many
+cells every, some and none of them reached (``--missed`` lists the last two with their aimed executions); with ``--faults``, the executions to the
 first finding of each hidden fault of the reference ADS on its network (``-``: not found), how many
 campaigns found it, and the distinct finding signatures per campaign. A finding is the fault's only when
 its scenario, run again with the clean reference ADS, does not show the same misbehaviour (the clean ADS
@@ -29,6 +30,8 @@ Usage::
     python tools/eval_coverage.py [--execs 1000] [--reps 5] [--networks town,...] [--jobs 2]
                                   [--configs risk,random,coverage,product] [--dump results.json]
                                   [--faults [--fault-execs N] [--fault-list f1,f2] [--stop-at-first] [--no-clean]]
+                                  [--missed]
+    python tools/eval_coverage.py --from-dump results.json [--missed]   # the tables again, nothing run
 
 Prints only; a benchmark, not a test.
 """
@@ -185,7 +188,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--dump", default="", help="also write every campaign's result (its reached cells too) "
                     "to this JSON file")
     ap.add_argument("--no-clean", action="store_true", help="with --faults: skip the clean coverage campaigns")
+    ap.add_argument("--missed", action="store_true", help="also list the cells some repetitions reached and others "
+                    "not, and those aimed at and reached by none, with each repetition's aimed executions")
+    ap.add_argument("--from-dump", default="", help="print the tables of a --dump file instead of running campaigns")
     args = ap.parse_args(argv)
+    if args.from_dump:
+        return _reprint(args, Path(args.from_dump))
     if args.reps < 1 or args.execs < 1 or args.first_rep < 0:
         ap.error("--reps and --execs must be at least 1, --first-rep at least 0")
     reps = range(args.first_rep, args.first_rep + args.reps)
@@ -214,6 +222,26 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
+def _reprint(args, dump: Path) -> int:
+    """The tables of a ``--dump`` file (its networks, configurations and repetitions)."""
+    try:
+        results = json.loads(dump.read_text())
+        clean = [r for r in results if r["fault"] is None]
+        networks = list(dict.fromkeys(r["network"] for r in clean))
+        configs = list(dict.fromkeys(r["feedback"] for r in results))
+        reps = sorted({r["rep"] for r in results})
+    except (OSError, ValueError, TypeError, KeyError) as e:
+        print(f"eval_coverage: {dump}: not a --dump file of this tool ({e})", file=sys.stderr)
+        return 2
+    args.first_rep, args.reps = (reps[0], len(reps)) if reps else (0, 0)
+    if clean:
+        _coverage_table(args, networks, configs, clean)
+    faults = list(dict.fromkeys(r["fault"] for r in results if r["fault"]))
+    if faults:
+        _fault_table(args, configs, faults, results)
+    return 0
+
+
 def _coverage_table(args, networks, configs, clean) -> None:
     """Per network and configuration the share reached in each repetition, its mean and p against random."""
     print(f"clean reference ADS, strategy {args.strategy}, {args.execs} executions per campaign "
@@ -234,11 +262,34 @@ def _coverage_table(args, networks, configs, clean) -> None:
             cells = next((r["reachable"] for r in clean if r["network"] == net), 0)
             print(f"{net:<14}{cells:>6}  {fb:<8}" + "".join(f"{100 * s:>6.1f}%" for s in shares[fb])
                   + f"{100 * statistics.mean(shares[fb]):>7.1f}%{p}")
+        for fb in configs:
+            rows = [r for r in clean if r["network"] == net and r["feedback"] == fb]
+            _spread(net, fb, rows, getattr(args, "missed", False))
     for fb in configs:
         if fb != "random" and pooled.get("random"):
             ratio = statistics.mean(pooled[fb]) / max(statistics.mean(pooled["random"]), 1e-9)
             name = "default" if fb == "risk" else fb
             print(f"coverage, {name} / random: {ratio:.2f} (p = {mann_whitney_p(pooled[fb], pooled['random']):.4f})")
+
+
+def _spread(net: str, fb: str, rows: list[dict], missed: bool) -> None:
+    """The cells reached by every repetition, by some and by none (the union's complement), with ``missed`` listed
+    with the aimed executions each had in every repetition: what a campaign reaches reliably, and what only a
+    lucky one does."""
+    if not rows or "cells" not in rows[0]:
+        return
+    reached = [set(r["cells"]) for r in rows]
+    union, every = set().union(*reached), set.intersection(*reached)
+    total = rows[0]["reachable"]
+    print(f"{'':<14}{'':>6}  {fb:<8}union {len(union)} ({100 * len(union) / max(total, 1):.1f}%), in every "
+          f"repetition {len(every)}, in some {len(union - every)}, in none {total - len(union)}")
+    if not missed:
+        return
+    for cell in sorted(union - every):
+        print(f"{'':<24}some ({sum(cell in r for r in reached)}/{len(rows)}) {cell}  aimed "
+              + ",".join(str(r["aimed"].get(cell, 0)) for r in rows if cell not in r["cells"]))
+    for cell in sorted({c for r in rows for c in r["aimed"]} - union):
+        print(f"{'':<24}none {cell}  aimed " + ",".join(str(r["aimed"].get(cell, 0)) for r in rows))
 
 
 def _fault_table(args, configs, faults, results) -> None:

@@ -97,9 +97,8 @@ def can_aim(rmap, seed_sc, cell: str, index: int) -> bool:
     """Whether the mutator, without a profile of any ADS (a job knows only its own seed's run), can aim at ``cell``
     on the mission of seed ``index`` in :data:`AIM_TRIES` draws (1-2 ms each; cached per process). On town a
     quarter of the (seed, cell) pairs the derivation offers it cannot (the derivation over-approximates): seed
-    005's yield junction A2 has no road from the right that a crossing car can be timed on, B0 on seed 002 has.
-    Sharing by offer alone gave 54 of town's 185 cells to a seed that cannot aim at them (a car from the right at
-    a yield sign to seed 005: seed 002 never aimed at it), now 10, those no seed can."""
+    000's one light, C2, lets no car from the right through when the ego comes; seed 004's lights do. Sharing by
+    offer alone gave 54 of town's 185 cells to a seed that cannot aim at them, now 9, those no seed can."""
     from drivefuzz.search.aim import aimed
     from drivefuzz.search.mutate import Mutator
 
