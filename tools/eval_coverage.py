@@ -14,9 +14,9 @@ and shrinking are off: they do not change coverage, only the wall time.
 
 Printed: per network the reachable cells, per configuration the share reached in each repetition, its mean,
 and Mann-Whitney U's two-sided p of ``risk`` against ``random``, then the union over the repetitions and how many
-cells every, some and none of them reached (``--missed`` lists the last two with their aimed executions); with ``--faults``, the executions to the
-first finding of each hidden fault of the reference ADS on its network (``-``: not found), how many
-campaigns found it, and the distinct finding signatures per campaign. A finding is the fault's only when
+cells every, some and none of them reached (``--missed`` lists the last two with their aimed executions); with
+``--faults``, the executions to the first finding of each hidden fault of the reference ADS on its network
+(``-``: not found), how many campaigns found it, and the distinct finding signatures per campaign. A finding is the fault's only when
 its scenario, run again with the clean reference ADS, does not show the same misbehaviour (the clean ADS
 has findings of its own: a car stopped for good behind an obstacle, say); every execution with a finding is
 judged, and in brackets, where it differs, the first finding of each signature only (:func:`_fault_finding`).
@@ -234,6 +234,7 @@ def _reprint(args, dump: Path) -> int:
         print(f"eval_coverage: {dump}: not a --dump file of this tool ({e})", file=sys.stderr)
         return 2
     args.first_rep, args.reps = (reps[0], len(reps)) if reps else (0, 0)
+    args.execs = max((r["execs"] for r in clean), default=args.execs)
     if clean:
         _coverage_table(args, networks, configs, clean)
     faults = list(dict.fromkeys(r["fault"] for r in results if r["fault"]))
