@@ -16,10 +16,10 @@ Printed: per network the reachable cells, per configuration the share reached in
 and Mann-Whitney U's two-sided p of ``risk`` against ``random``, then the union over the repetitions and how many
 cells every, some and none of them reached (``--missed`` lists the last two with their aimed executions); with
 ``--faults``, the executions to the first finding of each hidden fault of the reference ADS on its network
-(``-``: not found), how many campaigns found it, and the distinct finding signatures per campaign. A finding is the fault's only when
-its scenario, run again with the clean reference ADS, does not show the same misbehaviour (the clean ADS
-has findings of its own: a car stopped for good behind an obstacle, say); every execution with a finding is
-judged, and in brackets, where it differs, the first finding of each signature only (:func:`_fault_finding`).
+(``-``: not found), how many campaigns found it, and the distinct finding signatures per campaign. A finding
+is the fault's only when its scenario, run again with the clean reference ADS, does not show the same
+misbehaviour (the clean ADS has findings of its own: a car stopped for good behind an obstacle, say); every
+execution with a finding is judged, and in brackets, where it differs, the first finding of each signature only (:func:`_fault_finding`).
 ``--configs`` may add the other guided feedbacks (``coverage``, ``product``: the value that picks successors,
 drivefuzz.search.schedule); each is compared with ``random``. The last lines::
 
