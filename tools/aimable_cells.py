@@ -1,10 +1,11 @@
 """Which reachable interaction-coverage cells can the mutator aim at on no seed of a network?
 
-Per committed seed set: the cells the network and the seeds' routes offer (:func:`drivefuzz.triage.coverage.reachable`)
-and those for which no offering seed gets an aimed build in :data:`drivefuzz.campaign.aiming.AIM_TRIES` draws
-(:func:`drivefuzz.campaign.aiming.can_aim`, the mutator's model pace: a campaign times by the ADS's own pace, so a
-cell listed here may still be built there). The campaign's shares give such a cell to some seed all the same; its
-aims then build nothing, and only an encounter of another aim can reach it. Usage::
+Per committed seed set: the cells the network and the seeds' routes offer
+(:func:`drivefuzz.triage.coverage.reachable`) and those for which no offering seed gets an aimed build in
+:data:`drivefuzz.campaign.aiming.AIM_TRIES` draws (:func:`drivefuzz.campaign.aiming.can_aim`, the mutator's model
+pace: a campaign times by the ADS's own pace, so a cell listed here may still be built there). The campaign's
+shares give such a cell to some seed all the same; its aims then build nothing, and only an encounter of another
+aim can reach it. Usage::
 
     python tools/aimable_cells.py [--networks town,intersection,...]
 

@@ -19,7 +19,8 @@ cells every, some and none of them reached (``--missed`` lists the last two with
 (``-``: not found), how many campaigns found it, and the distinct finding signatures per campaign. A finding
 is the fault's only when its scenario, run again with the clean reference ADS, does not show the same
 misbehaviour (the clean ADS has findings of its own: a car stopped for good behind an obstacle, say); every
-execution with a finding is judged, and in brackets, where it differs, the first finding of each signature only (:func:`_fault_finding`).
+execution with a finding is judged, and in brackets, where it differs, the first finding of each signature only
+(:func:`_fault_finding`).
 ``--configs`` may add the other guided feedbacks (``coverage``, ``product``: the value that picks successors,
 drivefuzz.search.schedule); each is compared with ``random``. The last lines::
 
@@ -265,7 +266,7 @@ def _coverage_table(args, networks, configs, clean) -> None:
                   + f"{100 * statistics.mean(shares[fb]):>7.1f}%{p}")
         for fb in configs:
             rows = [r for r in clean if r["network"] == net and r["feedback"] == fb]
-            _spread(net, fb, rows, getattr(args, "missed", False))
+            _spread(fb, rows, args.missed)
     for fb in configs:
         if fb != "random" and pooled.get("random"):
             ratio = statistics.mean(pooled[fb]) / max(statistics.mean(pooled["random"]), 1e-9)
@@ -273,7 +274,7 @@ def _coverage_table(args, networks, configs, clean) -> None:
             print(f"coverage, {name} / random: {ratio:.2f} (p = {mann_whitney_p(pooled[fb], pooled['random']):.4f})")
 
 
-def _spread(net: str, fb: str, rows: list[dict], missed: bool) -> None:
+def _spread(fb: str, rows: list[dict], missed: bool) -> None:
     """The cells reached by every repetition, by some and by none (the union's complement), with ``missed`` listed
     with the aimed executions each had in every repetition: what a campaign reaches reliably, and what only a
     lucky one does."""

@@ -251,8 +251,7 @@ def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool = False, whole: boo
     if whole and back > speed * LATE_RUN_UP_S[1]:  # it enters later, a run-up before the meeting (at full speed)
         run = speed * rng.uniform(*LATE_RUN_UP_S) - d_c
         placed = mut._upstream(lane_id, lane_len, run, rng) if run > 0 else None
-        depart = round(t_meet - (placed[2] + d_c) / speed, 1) if placed is not None else 0.0
-        if depart <= 0.0:
+        if placed is None or (depart := round(t_meet - (placed[2] + d_c) / speed, 1)) <= 0.0:
             return None
     else:
         placed = mut._upstream(lane_id, lane_len, back, rng) if back > 0 else None
