@@ -131,6 +131,29 @@ def test_a_light_shifted_for_amber_is_yellow_as_the_ego_comes_to_it(mut, town_se
     assert seen >= 2
 
 
+def test_a_light_shifted_for_green_lets_the_ego_arrive_on_green_without_stopping(mut, town_seeds):
+    """Coverage reads the phase at arrival (the state when the ego came to rest at the light): seed 006 stands at
+    its light at C0 in its own run, so its green cells need the shift; on every seed with a light the ego then
+    passes within 30 m of the line without standing, on green."""
+    runs = []
+    for sc in town_seeds:
+        for at, *_ in mut._signals_ahead(sc)[:1]:
+            route, d = mut._route(sc), -sc.mission.start_pos
+            edge = next(e for e in route if abs((d := d + mut.rmap.edge(e).getLength()) - at) < 1.0)
+            for k in range(2):
+                new, desc = shift_light(mut, sc, at, "signal/green", random.Random(k))
+                assert new is not None and "turns green" in desc
+                trace = execute(new).trace
+                near = [i for i, ln in enumerate(str(x) for x in trace["lane"])
+                        if ln.startswith(edge + "_") and float(trace["tls_dist"][i]) < 30.0]
+                runs.append((sc.name, bool(near) and min(float(trace["speed"][i]) for i in near) >= 0.5
+                             and str(trace["tls_state"][near[-1]])[:1] in "gG"))
+    assert len(runs) >= 12 and all(ok for _, ok in runs), runs
+    own = execute(town_seeds[6]).trace  # the seed's own run stands at its light: the shift is what gives green
+    assert any(str(ln).startswith("C0C1_") and float(d) < 30.0 and float(v) < 0.5
+               for ln, d, v in zip(own["lane"], own["tls_dist"], own["speed"]))
+
+
 def test_no_vehicle_enters_within_reach_of_the_ego(mut, town_seeds):
     """A car that SUMO would insert on the lane beside the ego as the ego passes is refused; the same car
     entering well ahead of it is not (the rule behind the attribution rule ``appeared``)."""

@@ -109,6 +109,16 @@ def test_the_light_at_arrival_green_from_the_west_red_from_the_south(town_map):
     assert enc["v1"].element == "signal/red"
 
 
+def test_an_ego_that_waited_at_red_and_meets_a_car_as_it_sets_off_on_green_arrived_on_red(town_map):
+    """The phase at arrival is the light's state when the ego came to rest at it, not when it entered on green
+    (as signal engineering counts arrivals on red): the encounter just past the junction is a red one."""
+    past = Actor(id="v1", kind="vehicle", nav="immobile", start_lane="B1B2_1", start_pos=5.0, speed=0.0)
+    sc = _scenario("B0B1_1", 20.0, "B1B2", 80.0, past, time_limit=90.0)
+    enc, cells = _encounters(sc, town_map)
+    assert (enc["v1"].party, enc["v1"].element) == ("vehicle/ahead", "signal/red")
+    assert "party-element:vehicle/ahead|signal/red" in cells
+
+
 def test_a_run_without_actors_has_no_cells_unless_the_tyres_near_their_limit(town_map):
     from drivefuzz.search.risk import RiskScore
 

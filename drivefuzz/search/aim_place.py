@@ -65,7 +65,7 @@ def meeting(mut: Mutator, sc: Scenario, col: str, rng: random.Random) -> tuple[S
         at = rng.choice(spots)
         if col in ("turn_left", "turn_right"):  # just out of the junction: the ego's heading has turned
             return sc, at + rng.uniform(2.0, 8.0), ""
-        if col in ("signal/amber", "signal/red"):
+        if col.startswith("signal/"):
             new, desc = shift_light(mut, sc, at, col, rng)
             return (new, at, desc) if new is not None else (sc, None, "")
         return sc, at, ""
@@ -248,13 +248,15 @@ def profile_spots(mut: Mutator, sc: Scenario, col: str, band: tuple[float, float
 def shift_light(mut: Mutator, sc: Scenario, at: float, col: str, rng: random.Random) -> tuple[Scenario | None, str]:
     """``sc`` with the light of the route's junction at ``at`` shifted so that it turns yellow as the ego arrives
     (``signal/amber``: 0.2-2.5 s before: it drives in on yellow, or stands at the line while it is yellow) or
-    several seconds before (``signal/red``: it stops and waits at red); (None, "") where it has no such light."""
+    several seconds before (``signal/red``: it stops and waits at red), or green shortly before
+    (``signal/green``: 1-6 s, it arrives on green without stopping, wherever the seed's own run met the light);
+    (None, "") where it has no such light."""
     light = next(((tls, link) for s, tls, link in _lights(mut, sc) if abs(s - at) < 1.0), None)
     if light is None:
         return None, ""
     tls, link = light
     program = shiftable(str(mut.rmap.path), tls)
-    onsets = phase_starts(program, link, "yY")
+    onsets = phase_starts(program, link, "gG" if col == "signal/green" else "yY")
     if program is None or not onsets:
         return None, ""
     base = sc.model_copy(update={"signals": tuple(x for x in sc.signals if x.tls != tls)})
@@ -265,10 +267,12 @@ def shift_light(mut: Mutator, sc: Scenario, at: float, col: str, rng: random.Ran
         SignalShift(tls=tls, shift=round(k * program.cycle / 4, 2)),)}), max(at - 0.5, 0.0)) for k in range(4))
     # [s] the light turns yellow this long before the ego arrives: amber, while the ego enters or stands at the
     # line (drawn up to 1 s after its arrival, as before, 7 of 11 misses in seven town campaigns met it at green)
-    before = rng.uniform(0.2, 2.5) if col == "signal/amber" else rng.uniform(4.0, 12.0)
+    # (green: 1-6 s, so that a green of the shortest kind, 6 s or more, still shows when it arrives)
+    before = {"signal/amber": (0.2, 2.5), "signal/green": (1.0, 6.0)}.get(col, (4.0, 12.0))
+    before = rng.uniform(*before)
     shift = round((t_arrive - before - program.offset - rng.choice(onsets)) % program.cycle, 2)
     new = base.model_copy(update={"signals": base.signals + (SignalShift(tls=tls, shift=shift),)})
-    what = "yellow" if col == "signal/amber" else "yellow, then red,"
+    what = {"signal/amber": "yellow", "signal/green": "green"}.get(col, "yellow, then red,")
     return new, f"light {tls} turns {what} ~{before:.1f} s before the ego reaches it (shift {shift} s)"
 
 

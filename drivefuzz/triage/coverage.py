@@ -50,6 +50,9 @@ from drivefuzz.triage.evidence import (actor_track, along_path, frames_before, l
 from drivefuzz.triage.signature import element as signature_element
 
 GRIP = 0.85  #: [-] tyre friction use at or over this is an encounter with no other party
+#: [m] from its light's stop line within which the ego's first standstill is its arrival at the light (:func:`_phase`)
+ARRIVAL_M = 30.0
+STANDSTILL = 0.5  #: [m/s] under this the ego is at rest
 WINDOW_S = 3.0  #: [s] before the encounter over which the ego's manoeuvre is read
 APPROACH_S = 2.0  #: [s] before the encounter at which the other party's approach is read
 TURN = math.radians(30.0)  #: [rad] heading change that makes a turn
@@ -229,12 +232,24 @@ def element(scenario, trace, rmap, f: int) -> str:
 
 
 def _phase(trace, f: int) -> str:
-    """The ego's light at arrival: its state at the last frame before it entered the junction."""
-    lanes, states = trace["lane"], trace["tls_state"]
+    """The ego's light at arrival, as signal engineering counts arrivals on green and on red: its state when the
+    ego came to rest at the light (its first standstill within :data:`ARRIVAL_M` of the stop line on this
+    approach: at the line, or at the back of a short queue), or else at the last frame before it entered the
+    junction (or at ``f``, still on the approach). An ego that stops as the light turns yellow and is hit from
+    behind while it waits at red arrived on amber; one that waited at red and meets a late crossing car as it
+    sets off on green arrived on red (until the thirteenth session the state as it entered: both read green)."""
+    lanes, states, dist, speed = trace["lane"], trace["tls_state"], trace["tls_dist"], trace["speed"]
     k = f
     while k > 0 and str(lanes[k]).startswith(":"):
         k -= 1
-    s = str(states[k])[:1]
+    j, rest = k, None
+    # back over this approach to the same light (its distance grows backwards, or stays while at rest)
+    while j >= 0 and math.isfinite(float(dist[j])) and float(dist[j]) <= ARRIVAL_M \
+            and (j == k or float(dist[j]) >= float(dist[j + 1]) - 0.01):
+        if float(speed[j]) < STANDSTILL:
+            rest = j
+        j -= 1
+    s = str(states[k if rest is None else rest])[:1]
     if s and s in "yY":
         return "amber"
     return "red" if s and s in "rRu" else "green"
