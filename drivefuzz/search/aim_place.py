@@ -209,7 +209,8 @@ GRIP_MU = (0.05, 0.15)
 
 def grip_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
     """A low-friction patch (:data:`GRIP_MU`) across the ego's lane and the lanes beside it, from
-    :data:`GRIP_BEFORE_M` before the route distance ``at`` [m]: the ego changes lanes (or drives on) on it there.
+    :data:`GRIP_BEFORE_M` before the route distance ``at`` [m]: the ego changes lanes, brakes, turns (or drives on)
+    on it there.
     (From 5 m before, mu 0.05-0.3: the ego had changed lanes when it came to it, and used a third of its grip.)"""
     spot = cat._route_spot(mut, sc, max(at - GRIP_BEFORE_M, 0.0))
     if spot is None:
