@@ -268,7 +268,7 @@ def shift_light(mut: Mutator, sc: Scenario, at: float, col: str, rng: random.Ran
         SignalShift(tls=tls, shift=round(k * program.cycle / 4, 2)),)}), max(at - 0.5, 0.0)) for k in range(4))
     # [s] the light turns yellow this long before the ego arrives: amber, while the ego enters or stands at the
     # line (drawn up to 1 s after its arrival, as before, 7 of 11 misses in seven town campaigns met it at green)
-    # (green: 1-6 s, so that a green of the shortest kind, 6 s or more, still shows when it arrives)
+    # (green: 1-6 s, well inside the 35-40 s greens of the committed networks' lights)
     before = {"signal/amber": (0.2, 2.5), "signal/green": (1.0, 6.0)}.get(col, (4.0, 12.0))
     before = rng.uniform(*before)
     shift = round((t_arrive - before - program.offset - rng.choice(onsets)) % program.cycle, 2)
