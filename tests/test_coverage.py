@@ -117,6 +117,15 @@ def test_an_ego_that_waited_at_red_and_meets_a_car_as_it_sets_off_on_green_arriv
     enc, cells = _encounters(sc, town_map)
     assert (enc["v1"].party, enc["v1"].element) == ("vehicle/ahead", "signal/red")
     assert "party-element:vehicle/ahead|signal/red" in cells
+    from drivefuzz.ads import load_ads
+    from drivefuzz.sim.execute import execute
+
+    trace = execute(sc, ads=load_ads("ego"), oracles=[]).trace  # it stood at red and entered on green
+    lanes = [str(x) for x in trace["lane"]]
+    entry = next(i for i in range(1, len(lanes)) if lanes[i].startswith(":") and lanes[i - 1].startswith("B0B1_"))
+    assert str(trace["tls_state"][entry - 1])[:1] in "gG"
+    assert any(lanes[i].startswith("B0B1_") and float(trace["speed"][i]) < 0.5
+               and str(trace["tls_state"][i])[:1] in "rR" for i in range(entry))
 
 
 def test_a_run_without_actors_has_no_cells_unless_the_tyres_near_their_limit(town_map):
