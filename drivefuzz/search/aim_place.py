@@ -246,6 +246,14 @@ def profile_spots(mut: Mutator, sc: Scenario, col: str, band: tuple[float, float
     return picked
 
 
+#: per aimed phase: the states whose onset is shifted, the range [s] of how long before the ego arrives that onset
+#: comes, and what the description says. Amber: while the ego enters or stands at the line (drawn up to 1 s after
+#: its arrival, as before, 7 of 11 misses in seven town campaigns met it at green); red: it stops and waits;
+#: green: well inside the 35-40 s greens of the committed networks' lights (:func:`shift_light`)
+LIGHT_SHIFTS = {"signal/amber": ("yY", (0.2, 2.5), "yellow"), "signal/red": ("yY", (4.0, 12.0), "yellow, then red,"),
+                "signal/green": ("gG", (1.0, 6.0), "green")}
+
+
 def shift_light(mut: Mutator, sc: Scenario, at: float, col: str, rng: random.Random) -> tuple[Scenario | None, str]:
     """``sc`` with the light of the route's junction at ``at`` shifted so that it turns yellow as the ego arrives
     (``signal/amber``: 0.2-2.5 s before: it drives in on yellow, or stands at the line while it is yellow) or
@@ -257,7 +265,8 @@ def shift_light(mut: Mutator, sc: Scenario, at: float, col: str, rng: random.Ran
         return None, ""
     tls, link = light
     program = shiftable(str(mut.rmap.path), tls)
-    onsets = phase_starts(program, link, "gG" if col == "signal/green" else "yY")
+    states, early, what = LIGHT_SHIFTS.get(col, LIGHT_SHIFTS["signal/red"])
+    onsets = phase_starts(program, link, states)
     if program is None or not onsets:
         return None, ""
     base = sc.model_copy(update={"signals": tuple(x for x in sc.signals if x.tls != tls)})
@@ -266,14 +275,9 @@ def shift_light(mut: Mutator, sc: Scenario, at: float, col: str, rng: random.Ran
     # passed on the next green: 7 town seeds, a car behind at a red light, 0 hits); the earliest over four shifts
     t_arrive = min(mut._ego_eta(base.model_copy(update={"signals": base.signals + (
         SignalShift(tls=tls, shift=round(k * program.cycle / 4, 2)),)}), max(at - 0.5, 0.0)) for k in range(4))
-    # [s] the light turns yellow this long before the ego arrives: amber, while the ego enters or stands at the
-    # line (drawn up to 1 s after its arrival, as before, 7 of 11 misses in seven town campaigns met it at green)
-    # (green: 1-6 s, well inside the 35-40 s greens of the committed networks' lights)
-    before = {"signal/amber": (0.2, 2.5), "signal/green": (1.0, 6.0)}.get(col, (4.0, 12.0))
-    before = rng.uniform(*before)
+    before = rng.uniform(*early)  # [s] the light turns this long before the ego arrives
     shift = round((t_arrive - before - program.offset - rng.choice(onsets)) % program.cycle, 2)
     new = base.model_copy(update={"signals": base.signals + (SignalShift(tls=tls, shift=shift),)})
-    what = {"signal/amber": "yellow", "signal/green": "green"}.get(col, "yellow, then red,")
     return new, f"light {tls} turns {what} ~{before:.1f} s before the ego reaches it (shift {shift} s)"
 
 
