@@ -266,7 +266,7 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
     kind, approach = party.split("/", 1)
     side = "left" if approach.endswith("left") else "right" if approach.endswith("right") else None
     if kind == "none":  # a patch where the column puts the ego; the catalogue's lies before a random light or turn
-        if at is not None:  # of the route (town seeds, 3 draws per seed and cell: 39 of 270 hit their cell, now 121)
+        if at is not None:  # of the route (tools/lab_aim.py on town, 3 draws: 39 of 270 reached their cell, now 121)
             return [Situation("grip", "", partial(grip_at, at=at))]
         return [Situation("grip", "", cat.slippery_braking_zone)]
     if kind == "pedestrian":
