@@ -258,6 +258,72 @@ def test_a_campaign_shares_its_cells_among_its_seed_jobs(town_seeds):
     assert aim_cells([a, b, c], set(), {c: 3}, own=[c]) == [a, b]  # its share missed K times: the others
 
 
+def test_a_job_aims_first_at_the_cells_no_other_job_has_reached():
+    """What the campaign's other jobs reached (``elsewhere``) comes last: the job's share that nobody reached, then
+    its seed's other cells nobody reached, then its share reached elsewhere (at another junction, say)."""
+    a, b, c = "party-element:vehicle/ahead|edge", "party-manoeuvre:vehicle/behind|brake", "speed-condition:0-10 km/h|fog"
+    assert aim_cells([a, b, c], set(), {}, own=[a, b], elsewhere={a}) == [b]
+    assert aim_cells([a, b, c], set(), {}, own=[a], elsewhere={a}) == [b, c]  # the seed's others nobody reached
+    assert aim_cells([a, b, c], set(), {}, own=[a], elsewhere={a, b, c}) == [a]  # all reached elsewhere: its share
+    assert aim_cells([a, b, c], set(), {b: 3, c: 3}, own=[a], elsewhere={a}) == [a]  # the rest missed K times
+    assert aim_cells([a, b, c], {a}, {}, own=[a], elsewhere={a, b}) == [c]
+    assert aim_cells([a, b, c], set(), {}, own=[a]) == aim_cells([a, b, c], set(), {}, own=[a], elsewhere=()) == [a]
+
+
+def test_a_job_sees_what_the_others_reached_in_their_earlier_lineages_only(tmp_path):
+    """The view of the other jobs' cells is a pure function of their finished lineages: nothing in a job's first
+    lineage, then their seed runs and the lineages before its own; a line still being written (no newline yet) and
+    a torn one are read at the next call, or never."""
+    from drivefuzz.campaign.aiming import PeerView
+
+    def rec(lineage, *cells):
+        return json.dumps({"event": "end", "key": f"0/{lineage}", "lineage": lineage, "cells": list(cells)}) + "\n"
+
+    j0, j1 = tmp_path / "j0.jsonl", tmp_path / "j1.jsonl"
+    j0.write_text(rec(-1, "s") + '{"event": "start", "key": "0/0/0/0"}\n' + rec(0, "a") + '{"torn\n' + rec(1, "b"))
+    j1.write_text(rec(-1, "t") + rec(0, "c")[:-5])  # its lineage 0 still being written
+    view = PeerView([j0, j1, tmp_path / "not-yet.jsonl"])
+    assert view.reached(0) == frozenset()
+    assert view.reached(1) == {"s", "a", "t"}
+    with open(j1, "a") as fh:
+        fh.write(rec(0, "c")[-5:] + rec(2, "z"))
+    assert view.reached(2) == {"s", "a", "t", "b", "c"}
+    assert view.reached(1) == {"s", "a", "t", "c"}  # a later lineage's cells stay out of an earlier lineage's view
+    assert PeerView([j0, j1]).reached(3) == {"s", "a", "t", "b", "c", "z"}
+
+
+def test_jobs_aim_past_what_the_others_reached_the_same_on_dask_as_in_turns(tmp_path, town_seeds):
+    """Two seed jobs of one campaign: from its second lineage on, no job aims at a cell the other reached in its
+    earlier lineages while it has cells nobody reached; on Dask (a job's next lineage waits for the other's to end)
+    every execution is the one the campaign runs in turns, here."""
+    from drivefuzz.campaign.cluster import dask_client
+    from drivefuzz.scenario import SimOptions
+    from drivefuzz.triage.coverage import aimed_cell
+
+    seeds = [sc.model_copy(update={"sim": SimOptions(time_limit=30.0)}) for sc in town_seeds[1:3]]
+    cfg = dict(cycles=2, population=4, patience=1, max_execs=40, seed=3)
+
+    def ends(out):
+        recs = [json.loads(line) for si in range(2) for line in
+                (out / "jobs" / f"{si:03d}" / "journal.jsonl").read_text().splitlines()]
+        return {r["key"]: r for r in recs if r["event"] == "end"}
+
+    Campaign(tmp_path / "turns", seeds, FuzzConfig(**cfg)).run()
+    turns = ends(tmp_path / "turns")
+    later = [r for r in turns.values() if r["lineage"] >= 1 and aimed_cell(r)]
+    assert later
+    for r in later:
+        other = {c for o in turns.values() if o["seed_index"] != r["seed_index"] and o["lineage"] < r["lineage"]
+                 for c in o.get("cells") or ()}
+        assert aimed_cell(r) not in other, r["mutation"]
+    with dask_client("local", jobs=2) as client:
+        Campaign(tmp_path / "dask", seeds, FuzzConfig(**cfg)).run(client=client)
+    dask = ends(tmp_path / "dask")
+    both = set(turns) & set(dask)
+    assert len(both) >= 30 and any(turns[k]["lineage"] >= 1 for k in both)
+    assert all((turns[k]["hash"], turns[k]["mutation"]) == (dask[k]["hash"], dask[k]["mutation"]) for k in both)
+
+
 def test_a_crossing_car_is_timed_where_its_light_lets_it_through(mut, town_seeds):
     """At a signalised crossing the cross stream's green is the ego's red: a crossing car timed to the ego by the
     clock alone stopped at its light. Where the route also has a junction without a light, the crossing car is

@@ -59,8 +59,8 @@ import uuid
 from pathlib import Path
 from typing import Any, Callable
 
-from drivefuzz.campaign.aiming import (aim_cells, cached_shares, count_misses, seed_places, seed_reachable,
-                                      shares_by_place)
+from drivefuzz.campaign.aiming import (PeerView, aim_cells, cached_shares, count_misses, seed_places,
+                                      seed_reachable, shares_by_place)
 from drivefuzz.campaign.config import FuzzConfig
 from drivefuzz.campaign.hosts import Runner, warm_up
 from drivefuzz.oracle import Misbehavior
@@ -288,6 +288,7 @@ class SeedJob:
         executed = {r["effect"] for r in done.values() if r.get("effect")} | {effect_hash(seed_sc)}
         reach = seed_reachable(mutator.rmap, seed_sc) if cfg.feedback in GUIDED else ()
         own = self._own_cells(mutator.rmap) if reach else ()
+        peers = self._peer_view() if reach else None  # what the other jobs reached in their earlier lineages
         misses: dict[str, int] = dict(ckpt.get("aim_misses") or {})  # per cell: aimed builds that missed it
 
         while True:
@@ -302,7 +303,8 @@ class SeedJob:
             parent_hash = parent.content_hash()
             members: list[tuple[dict[str, Any], Any]] = []
             seen = {effect_hash(parent)}
-            aim = aim_cells(reach, schedule.cells, misses, own)  # the job's unreached cells (guided feedback)
+            elsewhere = peers.reached(lin.number) if peers is not None else ()
+            aim = aim_cells(reach, schedule.cells, misses, own, elsewhere)  # its unreached cells (guided feedback)
             for member in range(cfg.population):
                 t0 = time.perf_counter()
                 key = f"{self.si}/{lin.number}/{lin.cycle}/{member}"
@@ -365,6 +367,13 @@ class SeedJob:
             return shares[self.si]
         places = [seed_places(rmap, sc) if ok else {} for sc, ok in zip(seeds, same)]
         return shares_by_place(rmap, seeds, places)[self.si]
+
+    def _peer_view(self) -> PeerView:
+        """The view of what the campaign's other jobs on this seed's network reached (:class:`PeerView`)."""
+        mine = self.seed.network_path()
+        peers = [j for j, ref in enumerate(self.seed_refs) if j != self.si
+                 and load_scenario(self.out / ref).network_path() == mine]
+        return PeerView([job_dir(self.out, j) / "journal.jsonl" for j in peers])
 
     def _select(self, members: list[tuple[dict[str, Any], Any]], schedule, rng: random.Random):
         """(corpus folder, riskiest actor, feedback value) of the member that becomes the next scenario, or

@@ -69,6 +69,10 @@ INTO_LANE = {"vehicle/behind": ("behind", None), "vehicle/rear_left": ("rear", "
 #: [m] past a lane change's place where a car stands on the lane the ego changes into (4-14 m, as past a turn:
 #: the ego stopped for it before it moved over)
 STANDING_PAST_CHANGE_M = (10.0, 22.0)
+#: [m] past a lane change's place where a walker crosses (the ego meets it 1-2 s after the change)
+WALKER_PAST_CHANGE_M = (5.0, 20.0)
+#: [m] past a turn's place (2-8 m into the road the ego turns into) where a walker crosses that road
+WALKER_PAST_TURN_M = (0.0, 6.0)
 #: what meets an ego that enters at speed (too soon for a timed party to run up): a car ahead, braking or slower
 MOVING_START_AHEAD = ("lead_brakes", "brake_check", "lead_slower", "slow_ahead")
 #: [m] past a lane change's place where an oncoming car is level with the ego
@@ -276,9 +280,11 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
             return [Situation("walker_along", "", _walker_along)]
         # it reaches the road 1 s after to 1.5 s before the ego is expected there (the catalogue's 0-4 s early
         # gives a post-encroachment time over 2 s, no close encounter, in a third of the draws)
-        if col == "lane_change" and at is not None:  # just past the place where the route makes it change lanes
+        if col in ("lane_change", "turn_left", "turn_right") and at is not None:
+            # just past the place where the route makes it change lanes, or on the road it turns into
+            past = WALKER_PAST_CHANGE_M if col == "lane_change" else WALKER_PAST_TURN_M
             crosses = Situation("walker_after", "", partial(_walker_after, walker_from_left if side == "left"
-                                                            else cat.walker_crosses, at))
+                                                            else cat.walker_crosses, at, past))
             return [crosses if side == "left" else _filtered(crosses, partial(_on_side, mut, sc, side))]
         if side == "left":  # the catalogue's walker starts on the ego's own edge: its right, where traffic keeps right
             return [Situation("walker_crosses", "", walker_from_left),
@@ -315,10 +321,12 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
     return [Situation("crossing", "", partial(_crossing, want=approach, col=col, at=at))]  # crossing_left / _right
 
 
-def _walker_after(builder: Callable, at: float, mut: Mutator, sc: Scenario, rng: random.Random):
-    """``builder`` (a crossing walker) crossing 5-20 m past the route distance ``at``, reaching the road from 1 s
-    after to 1.5 s before the ego: the ego meets it 1-2 s after it has changed lanes there."""
-    return builder(mut, sc, rng, early=(-1.0, 1.5), at=at + rng.uniform(5.0, 20.0))
+def _walker_after(builder: Callable, at: float, past: tuple[float, float], mut: Mutator, sc: Scenario,
+                  rng: random.Random):
+    """``builder`` (a crossing walker) crossing ``past`` [m] (a range) beyond the route distance ``at``, reaching
+    the road from 1 s after to 1.5 s before the ego: the ego meets it 1-2 s after it has changed lanes or turned
+    there."""
+    return builder(mut, sc, rng, early=(-1.0, 1.5), at=at + rng.uniform(*past))
 
 
 def _on_side(mut: Mutator, sc: Scenario, side: str | None, actor) -> bool:
