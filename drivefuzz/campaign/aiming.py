@@ -114,7 +114,8 @@ def can_aim(rmap, seed_sc, cell: str, index: int) -> bool:
     return _CAN_AIM[key]
 
 
-def aim_cells(reach, reached, misses: dict[str, int], own=(), elsewhere=()) -> list[str]:
+def aim_cells(reach, reached, misses: dict[str, int], own=(), elsewhere=(),
+              can: Callable[[str], bool] | None = None) -> list[str]:
     """The cells a job aims at: its share of the campaign's cells (``own``, :func:`share_cells`) not reached yet
     by it; when it has reached them all, its seed's other reachable cells not reached yet. Less, in both, those
     its aimed builds have missed :data:`AIM_MISSES` times (the aims spread over the others), and every lane-change
@@ -125,7 +126,9 @@ def aim_cells(reach, reached, misses: dict[str, int], own=(), elsewhere=()) -> l
     ``elsewhere``: the cells the campaign's other jobs have reached (:class:`PeerView`). The cells nobody has
     reached come first, the job's share of them, then its seed's others; then its share of those another job
     reached (at another junction, say). On two 1,000-execution town campaigns without it, 210-237 of some 420
-    aims went at a cell another job had already reached (`docs/coverage.md`, fourteenth session)."""
+    aims went at a cell another job had already reached (`docs/coverage.md`, fourteenth session). ``can(cell)``
+    (:func:`can_aim` on the job's seed) keeps the seed's other cells nobody reached to those the mutator can build
+    on its mission: an aim it cannot build becomes an ordinary mutation."""
     unreached = [c for c in reach if c not in reached]
     own = set(own)
     # a start on another lane makes any ADS change lanes, but each such cell it misses costs an execution: past
@@ -134,7 +137,8 @@ def aim_cells(reach, reached, misses: dict[str, int], own=(), elsewhere=()) -> l
     # start; with this rule still 3 of 5; with a cell aimed at each of its junctions, 8 of 10: docs/coverage.md)
     waits = misses.get(BLOCKED_MISS, 0) >= AIM_MISSES or misses.get(SHIFTED_MISS, 0) >= AIM_MISSES
     nobody = [c for c in unreached if c not in elsewhere]
-    for cells in ([c for c in nobody if c in own], nobody, [c for c in unreached if c in own], unreached):
+    others = [c for c in nobody if c in own or can is None or can(c)] if elsewhere else nobody
+    for cells in ([c for c in nobody if c in own], others, [c for c in unreached if c in own], unreached):
         aim = [c for c in cells if misses.get(c, 0) < AIM_MISSES and not (waits and c.endswith("|lane_change"))]
         if aim:
             return aim

@@ -59,7 +59,7 @@ import uuid
 from pathlib import Path
 from typing import Any, Callable
 
-from drivefuzz.campaign.aiming import (PeerView, aim_cells, cached_shares, count_misses, seed_places,
+from drivefuzz.campaign.aiming import (PeerView, aim_cells, cached_shares, can_aim, count_misses, seed_places,
                                       seed_reachable, shares_by_place)
 from drivefuzz.campaign.config import FuzzConfig
 from drivefuzz.campaign.hosts import Runner, warm_up
@@ -304,7 +304,8 @@ class SeedJob:
             members: list[tuple[dict[str, Any], Any]] = []
             seen = {effect_hash(parent)}
             elsewhere = peers.reached(lin.number) if peers is not None else ()
-            aim = aim_cells(reach, schedule.cells, misses, own, elsewhere)  # its unreached cells (guided feedback)
+            aim = aim_cells(reach, schedule.cells, misses, own, elsewhere,  # its unreached cells (guided feedback)
+                            lambda c: can_aim(mutator.rmap, seed_sc, c, self.si))
             for member in range(cfg.population):
                 t0 = time.perf_counter()
                 key = f"{self.si}/{lin.number}/{lin.cycle}/{member}"
