@@ -292,36 +292,62 @@ def test_a_job_sees_what_the_others_reached_in_their_earlier_lineages_only(tmp_p
     assert PeerView([j0, j1]).reached(3) == {"s", "a", "t", "b", "c", "z"}
 
 
-def test_jobs_aim_past_what_the_others_reached_the_same_on_dask_as_in_turns(tmp_path, town_seeds):
-    """Two seed jobs of one campaign: from its second lineage on, no job aims at a cell the other reached in its
-    earlier lineages while it has cells nobody reached; on Dask (a job's next lineage waits for the other's to end)
-    every execution is the one the campaign runs in turns, here."""
+def test_jobs_aim_past_what_the_others_reached_and_a_resume_aims_as_the_first_run(tmp_path, town_seeds):
+    """Two seed jobs of one campaign. From its second lineage on, no job aims at a cell the other had reached while
+    it has cells nobody reached; its journal records what the other had reached when each lineage began, and a
+    resume aims past that record (on Dask the other job's progress at that moment depends on the two paces). In turns
+    a campaign stopped and resumed runs what one run of the summed budget runs."""
+    from drivefuzz.campaign.aiming import PeerView
     from drivefuzz.campaign.cluster import dask_client
+    from drivefuzz.campaign.fuzz import load_campaign
+    from drivefuzz.campaign.job import PEERS, SeedJob, peer_views
     from drivefuzz.scenario import SimOptions
     from drivefuzz.triage.coverage import aimed_cell
 
     seeds = [sc.model_copy(update={"sim": SimOptions(time_limit=30.0)}) for sc in town_seeds[1:3]]
-    cfg = dict(cycles=2, population=4, patience=1, max_execs=40, seed=3)
+    cfg = dict(cycles=2, population=4, patience=1, seed=3)
 
-    def ends(out):
-        recs = [json.loads(line) for si in range(2) for line in
-                (out / "jobs" / f"{si:03d}" / "journal.jsonl").read_text().splitlines()]
-        return {r["key"]: r for r in recs if r["event"] == "end"}
+    def journal(out, si):
+        return [json.loads(line) for line in (out / "jobs" / f"{si:03d}" / "journal.jsonl").read_text().splitlines()]
 
-    Campaign(tmp_path / "turns", seeds, FuzzConfig(**cfg)).run()
-    turns = ends(tmp_path / "turns")
-    later = [r for r in turns.values() if r["lineage"] >= 1 and aimed_cell(r)]
-    assert later
-    for r in later:
-        other = {c for o in turns.values() if o["seed_index"] != r["seed_index"] and o["lineage"] < r["lineage"]
-                 for c in o.get("cells") or ()}
-        assert aimed_cell(r) not in other, r["mutation"]
+    def check(out) -> int:
+        """Every lineage after the first aimed past its recorded view; return how many aims that concerned."""
+        ends = [r for si in range(2) for r in journal(out, si) if r["event"] == "end"]
+        aims = 0
+        for si in range(2):
+            views = peer_views(journal(out, si))
+            lineages = {r["lineage"] for r in ends if r["seed_index"] == si and r["lineage"] >= 1}
+            assert lineages and lineages <= set(views)
+            for lin in lineages:
+                before = {c for r in ends if r["seed_index"] != si and r["lineage"] < lin for c in r.get("cells") or ()}
+                assert views[lin] <= before  # what the other had journalled in its earlier lineages, no more
+                for r in ends:
+                    if r["seed_index"] == si and r["lineage"] == lin and aimed_cell(r):
+                        assert aimed_cell(r) not in views[lin], r["mutation"]
+                        aims += 1
+        return aims
+
+    Campaign(tmp_path / "turns", seeds, FuzzConfig(max_execs=40, **cfg)).run()
+    assert check(tmp_path / "turns") >= 3
+    Campaign(tmp_path / "resumed", seeds, FuzzConfig(max_execs=20, **cfg)).run()
+    seeds_, resumed_cfg, _ = load_campaign(tmp_path / "resumed")
+    resumed_cfg.max_execs = 20
+    Campaign(tmp_path / "resumed", seeds_, resumed_cfg).run(resume=True)
+    assert [[r["hash"] for r in journal(tmp_path / "resumed", si) if r["event"] == "end"] for si in range(2)] == \
+        [[r["hash"] for r in journal(tmp_path / "turns", si) if r["event"] == "end"] for si in range(2)]
     with dask_client("local", jobs=2) as client:
-        Campaign(tmp_path / "dask", seeds, FuzzConfig(**cfg)).run(client=client)
-    dask = ends(tmp_path / "dask")
-    both = set(turns) & set(dask)
-    assert len(both) >= 30 and any(turns[k]["lineage"] >= 1 for k in both)
-    assert all((turns[k]["hash"], turns[k]["mutation"]) == (dask[k]["hash"], dask[k]["mutation"]) for k in both)
+        Campaign(tmp_path / "dask", seeds, FuzzConfig(max_execs=40, **cfg)).run(client=client)
+    assert check(tmp_path / "dask") >= 1
+    # a resumed job takes the view its journal recorded, not what the other job has reached by now
+    job = SeedJob(tmp_path / "dask", 1)
+    job.views = peer_views(journal(tmp_path / "dask", 1))
+    grown = tmp_path / "grown.jsonl"  # the other job's journal, grown since (it reached one more cell)
+    grown.write_text((tmp_path / "dask" / "jobs" / "000" / "journal.jsonl").read_text() + json.dumps(
+        {"event": "end", "key": "0/0/9/0", "lineage": 0, "cells": ["party-element:vehicle/grown|edge"]}) + "\n")
+    now = PeerView([grown])
+    assert "party-element:vehicle/grown|edge" in now.reached(1) and "party-element:vehicle/grown|edge" not in job.views[1]
+    assert job._elsewhere(now, 1) == job.views[1]
+    assert sum(r["event"] == PEERS for r in journal(tmp_path / "dask", 1)) == len(job.views)
 
 
 def test_a_crossing_car_is_timed_where_its_light_lets_it_through(mut, town_seeds):

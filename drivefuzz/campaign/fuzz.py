@@ -41,7 +41,6 @@ import drivefuzz
 from drivefuzz.errors import InvalidConfig
 from drivefuzz.campaign.config import FINISHED, FuzzConfig  # noqa: F401  (FuzzConfig re-exported)
 from drivefuzz.campaign.job import STOP_FILE, SeedJob, job_dir, run_seed_job
-from drivefuzz.search.schedule import GUIDED
 from drivefuzz.oracle import Misbehavior, OracleSettings
 from drivefuzz.scenario import AdsSpec, Scenario
 from drivefuzz.storage import atomic_write_json
@@ -361,23 +360,9 @@ class Campaign:
                 elif summary["status"] == "stopped":
                     return
 
-    def submit(self, client, pending: list[int]) -> tuple[dict[Any, int], list[int]]:
-        """Submit the pending seed jobs that may start their next lineage (:meth:`ready`) to Dask; return them by
-        future, and the others. The budget clock starts when the first of them runs."""
-        return {self.resubmit(client, si): si for si in pending if self.ready(si)}, \
-            [si for si in pending if not self.ready(si)]
-
-    def ready(self, si: int) -> bool:
-        """Whether seed job ``si`` may start its next lineage on Dask: under guided feedback every other job that
-        has not finished has finished as many lineages, so that what the job reads of their journals (their
-        cells in earlier lineages: :class:`drivefuzz.campaign.aiming.PeerView`) is complete and the same in every
-        run. (One lineage per turn here, as ``--jobs 1`` runs them; a job that finishes its lineage early waits
-        for the others' turn to end.)"""
-        if self.cfg.feedback not in GUIDED:
-            return True
-        n = _lineages_done(self.out, si)
-        return all(_lineages_done(self.out, j) >= n for j in range(len(self.seeds))
-                   if j != si and j not in self.failed_jobs and not (job_dir(self.out, j) / "summary.json").exists())
+    def submit(self, client, pending: list[int]) -> dict[Any, int]:
+        """Submit the pending seed jobs to Dask; the budget clock starts when the first of them runs."""
+        return {self.resubmit(client, si): si for si in pending}
 
     def resubmit(self, client, si: int):
         """One more round (lineage) of seed job ``si`` on Dask."""
@@ -414,19 +399,16 @@ def run_on_dask(client, work: list[tuple[Campaign, list[int]]], max_running: int
                             "simulation", "workers started with --nthreads 1, or keep isolation on")
     queue = list(work)
     active: dict[Any, tuple[Campaign, int]] = {}
-    waiting: list[tuple[Campaign, int]] = []  # jobs whose next lineage waits for the others' (Campaign.ready)
     running: list[Campaign] = []
     stopped: set[int] = set()
     try:
-        while queue or active or waiting:
+        while queue or active:
             if queue and any(c.stop_requested for c, _ in work):
                 queue.clear()  # Ctrl-C: start nothing new
             while queue and (max_running is None or len(running) < max_running):
                 campaign, pending = queue.pop(0)
                 running.append(campaign)
-                submitted, held = campaign.submit(client, pending)
-                active.update({f: (campaign, si) for f, si in submitted.items()})
-                waiting += [(campaign, si) for si in held]
+                active.update({f: (campaign, si) for f, si in campaign.submit(client, pending).items()})
             if active:
                 try:
                     wait(list(active), timeout=0.5, return_when="FIRST_COMPLETED")
@@ -447,17 +429,10 @@ def run_on_dask(client, work: list[tuple[Campaign, list[int]]], max_running: int
                 if summary["status"] == "done":
                     campaign.progress.jobs_done += 1
                 elif summary["status"] == "yielded" and not campaign.out_of_budget():
-                    waiting.append((campaign, si))
-            for campaign, si in list(waiting):
-                if campaign.out_of_budget() or campaign.stop_requested:
-                    waiting.remove((campaign, si))
-                elif campaign.ready(si):
-                    waiting.remove((campaign, si))
                     active[campaign.resubmit(client, si)] = (campaign, si)
             for campaign in list(running):
                 left = [si for c, si in active.values() if c is campaign]
                 campaign.progress.jobs_running = campaign.jobs_running(left)
-                left += [si for c, si in waiting if c is campaign]
                 campaign.on_progress(campaign.progress)
                 if not left:
                     campaign.poll()  # what the last jobs journalled after the poll above

@@ -21,8 +21,10 @@ campaign gives the next seed its turn, until the budget is spent. Without a budg
 
 Determinism: every random draw comes from ``Random(f"{seed}/{seed_index}/{lineage}/{cycle}/{parent hash}/...")``,
 so two configurations that choose different successors have different futures, and a job is a pure
-function of its seed scenario, the configuration and the executions' results; a resumed job re-creates
-exactly the executions it had not finished.
+function of its seed scenario, the configuration, the executions' results and (under guided feedback) what
+the other jobs had reached when each of its lineages began, which its journal records; a resumed job re-creates
+exactly the executions it had not finished. Run in turns (``--jobs 1``) the whole campaign is a pure function of
+its seeds and configuration; on Dask what the other jobs had reached depends on their pace.
 
 Files of job ``NNN`` (the seed index) under ``jobs/NNN/``::
 
@@ -33,7 +35,9 @@ Files of job ``NNN`` (the seed index) under ``jobs/NNN/``::
                       fsync'd before every checkpoint and at the end of a round, not per record
                       (two fsyncs per execution cost 5 % of a campaign's time): a power cut
                       loses at most the current cycle's records, whose executions a resume
-                      runs again with the same results
+                      runs again with the same results; under guided feedback, at the start of
+                      each lineage after the first, {"event": "peers", lineage, cells}: what the
+                      other jobs had reached (campaign.aiming.PeerView), which a resume reads back
     checkpoint.json   the schedule (corpus, the current lineage) and the seed's baseline risk (atomic)
     summary.json      written last, when the job has finished its seed: the DONE marker
     owner             the attempt that owns the job: an older attempt that is still running
@@ -71,6 +75,8 @@ from drivefuzz.triage.store import FindingStore, TriageConfig
 from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
 
 STOP_FILE = "STOP"
+#: the journal's record of what the other jobs had reached when a lineage began (:class:`PeerView`)
+PEERS = "peers"
 #: the campaign's cells shared among its seed jobs (campaign.aiming.share_cells), written by the first job
 SHARES_FILE = "aim_shares.json"
 #: Draws of a population member that repeats (in effect) an execution of its job, its parent or a sibling
@@ -135,6 +141,7 @@ class SeedJob:
         self.seed = load_scenario(self.out / self.seed_refs[seed_index])
         self.journal = self.dir / "journal.jsonl"
         self.findings: list[str] = []
+        self.views: dict[int, frozenset[str]] = {}  # per lineage: the other jobs' cells it aims past (PeerView)
 
     # ---------------------------------------------------------------- files
     def _owned(self) -> bool:
@@ -210,6 +217,7 @@ class SeedJob:
         atomic_write_text(self.dir / "owner", self.token)
         history = read_journal(self.journal)
         done = {r["key"]: r for r in history if r.get("event") == "end"}
+        self.views = peer_views(history)
         attempts = sum(1 for r in history if r.get("event") == "attempt") + 1
         _append(self.journal, {"event": "attempt", "pid": os.getpid(), "resumed_from": len(done),
                                "host": os.uname().nodename, "time": time.time(), "run": self.run_id}, after_kill=True,
@@ -303,7 +311,7 @@ class SeedJob:
             parent_hash = parent.content_hash()
             members: list[tuple[dict[str, Any], Any]] = []
             seen = {effect_hash(parent)}
-            elsewhere = peers.reached(lin.number) if peers is not None else ()
+            elsewhere = self._elsewhere(peers, lin.number) if peers is not None else ()
             aim = aim_cells(reach, schedule.cells, misses, own, elsewhere,  # its unreached cells (guided feedback)
                             lambda c: can_aim(mutator.rmap, seed_sc, c, self.si))
             for member in range(cfg.population):
@@ -368,6 +376,16 @@ class SeedJob:
             return shares[self.si]
         places = [seed_places(rmap, sc) if ok else {} for sc, ok in zip(seeds, same)]
         return shares_by_place(rmap, seeds, places)[self.si]
+
+    def _elsewhere(self, peers: PeerView, lineage: int) -> frozenset[str]:
+        """The other jobs' cells this lineage aims past: as the journal recorded them when the lineage began (a
+        resumed job aims as the first run did), else read now and recorded before its first execution."""
+        if lineage not in self.views:
+            self.views[lineage] = peers.reached(lineage)
+            if lineage > 0:
+                _append(self.journal, {"event": PEERS, "lineage": lineage, "cells": sorted(self.views[lineage]),
+                                       "pid": os.getpid()})
+        return self.views[lineage]
 
     def _peer_view(self) -> PeerView:
         """The view of what the campaign's other jobs on this seed's network reached (:class:`PeerView`)."""
@@ -458,6 +476,17 @@ class SeedJob:
         # the work this record stands for: the execution and every triage rerun (careful driver, reproduction,
         # shrinking), in runs and in simulated seconds (tools/bench_scaling.py counts work by them)
         rec["runs"], rec["sim_s"] = runner.runs - runs0, round(runner.sim_s - sim0, 3)
+
+
+def peer_views(history: list[dict[str, Any]]) -> dict[int, frozenset[str]]:
+    """The other jobs' cells each lineage of a job aimed past, by lineage, as its journal recorded them (a record
+    that is not one is skipped: the lineage's view is read again)."""
+    views: dict[int, frozenset[str]] = {}
+    for r in history:
+        if r.get("event") == PEERS and isinstance(r.get("lineage"), int) and isinstance(r.get("cells"), list) \
+                and all(isinstance(c, str) for c in r["cells"]):
+            views.setdefault(r["lineage"], frozenset(r["cells"]))
+    return views
 
 
 def _feedback_value(rec: dict[str, Any], mode: str) -> float:
