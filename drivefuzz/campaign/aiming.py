@@ -4,8 +4,8 @@ A campaign's seed jobs run in parallel, so every reachable cell falls to one of 
 the mutator can aim at on each seed's mission: :func:`can_aim`); a job aims at the cells nobody has reached first
 (what the other jobs reached in their earlier lineages: :class:`PeerView`), its share of them, then its seed's
 others, and gives up on a cell its aimed builds keep missing (:func:`aim_cells`, :func:`count_misses`). The shares
-are a pure function of the manifest's seeds, the misses of the job's own results, and the other jobs' cells are
-recorded in its journal, so a resumed job aims as the first run did.
+are a pure function of the manifest's seeds and the misses of the job's own results; the other jobs' cells are
+recorded in its journal. So a resumed job aims as the first run did.
 """
 
 from __future__ import annotations
@@ -129,7 +129,8 @@ def aim_cells(reach, reached, misses: dict[str, int], own=(), elsewhere=(),
     reached (at another junction, say). On two 1,000-execution town campaigns without it, 210-237 of some 420
     aims went at a cell another job had already reached (`docs/coverage.md`, fourteenth session). ``can(cell)``
     (:func:`can_aim` on the job's seed) keeps the seed's other cells nobody reached to those the mutator can build
-    on its mission: an aim it cannot build becomes an ordinary mutation."""
+    on its mission: an aim it cannot build becomes an ordinary mutation. Without ``elsewhere`` (a job's first
+    lineage) the order is the one before: its share, then its seed's others."""
     unreached = [c for c in reach if c not in reached]
     own = set(own)
     # a start on another lane makes any ADS change lanes, but each such cell it misses costs an execution: past
