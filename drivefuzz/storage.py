@@ -78,3 +78,23 @@ def atomic_dir(path: str | os.PathLike) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+
+
+def read_new_lines(path: Path, offset: int) -> tuple[list[Any], int]:
+    """The JSON values of the complete lines of ``path`` after byte ``offset``, and the offset to read on from: a
+    line not ended yet (being written) is left for the next read, one torn by a kill and appended after is skipped.
+    ``([], offset)`` when the file cannot be read (not written yet)."""
+    try:
+        with open(path, "rb") as fh:
+            fh.seek(offset)
+            data = fh.read()
+    except OSError:
+        return [], offset
+    end = data.rfind(b"\n") + 1
+    values = []
+    for line in data[:end].splitlines():
+        try:
+            values.append(json.loads(line))
+        except (ValueError, RecursionError):
+            continue
+    return values, offset + end

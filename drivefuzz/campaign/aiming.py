@@ -10,13 +10,13 @@ recorded in its journal. So a resumed job aims as the first run did.
 
 from __future__ import annotations
 
-import json
 import random
 from pathlib import Path
 from typing import Any, Callable
 
 from drivefuzz.search.aim import BLOCKED_LANE
 from drivefuzz.search.aim_place import SHIFTED_START
+from drivefuzz.storage import read_new_lines
 from drivefuzz.triage.coverage import aimed_cell
 
 #: a job stops aiming at a cell once this many of its aimed builds missed it (while it has other cells to aim at)
@@ -167,19 +167,8 @@ class PeerView:
         if lineage <= 0:
             return frozenset()
         for k, path in enumerate(self.journals):
-            try:
-                with open(path, "rb") as fh:
-                    fh.seek(self._offsets[k])
-                    data = fh.read()
-            except OSError:
-                continue
-            end = data.rfind(b"\n") + 1  # a line being written is read next time
-            self._offsets[k] += end
-            for line in data[:end].splitlines():
-                try:
-                    rec = json.loads(line)
-                except (ValueError, RecursionError):
-                    continue
+            recs, self._offsets[k] = read_new_lines(path, self._offsets[k])
+            for rec in recs:
                 if isinstance(rec, dict) and rec.get("event") == "end" and isinstance(rec.get("lineage"), int) \
                         and isinstance(rec.get("cells"), list):
                     self._by_lineage.setdefault(rec["lineage"], set()).update(

@@ -45,6 +45,7 @@ import numpy as np
 
 from drivefuzz.search.episodes import GAP_M, PET_S, TTC_S  # the thresholds of a close encounter
 from drivefuzz.sim.world import sun_glare
+from drivefuzz.storage import read_new_lines
 from drivefuzz.triage.evidence import (actor_track, along_path, frames_before, lane_changed, lateral_shift, to_local,
                                        wrap_angle)
 from drivefuzz.triage.signature import element as signature_element
@@ -539,20 +540,8 @@ class JournalCells:
         """Read the journals' new complete lines; return how many new executions."""
         new = 0
         for path in sorted((self.out / "jobs").glob("*/journal.jsonl")):
-            offset = self._offsets.get(path, 0)
-            try:
-                with open(path, "rb") as fh:
-                    fh.seek(offset)
-                    data = fh.read()
-            except OSError:
-                continue
-            end = data.rfind(b"\n") + 1
-            self._offsets[path] = offset + end
-            for line in data[:end].splitlines():
-                try:
-                    rec = json.loads(line)
-                except (ValueError, RecursionError):
-                    continue
+            recs, self._offsets[path] = read_new_lines(path, self._offsets.get(path, 0))
+            for rec in recs:
                 if isinstance(rec, dict) and rec.get("event") == "end" and isinstance(rec.get("key"), str) \
                         and rec["key"] not in self.records:
                     self.records[rec["key"]] = {"cells": [c for c in rec.get("cells") or () if isinstance(c, str)],
