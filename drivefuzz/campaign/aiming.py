@@ -154,8 +154,8 @@ class PeerView:
     view is a pure function of the campaign's seeds; on Dask the jobs run at their own pace and a job sees what
     the others had journalled by then. Either way the job records the view in its journal when the lineage begins
     (:func:`drivefuzz.campaign.job.peer_views`), so a resume aims as the first run did. (Waiting on Dask for the
-    others' lineages to end would make the view timing-free, at a cost: on two town campaigns' lineage times, 15-56
-    % more wall time with 4-8 workers for 8 seeds.) Journals are read on from where the last read ended."""
+    others' lineages to end would make the view timing-free, at a cost: estimated from two town campaigns' lineage
+    times, 15-56 % more wall time with 4-8 workers for 8 seeds.) Journals are read on from where the last read ended."""
 
     def __init__(self, journals: list[Path]):
         self.journals = journals
