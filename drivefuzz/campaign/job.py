@@ -55,6 +55,7 @@ current execution (the budget ran out, or the user pressed Ctrl-C).
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import random
@@ -297,6 +298,7 @@ class SeedJob:
         reach = seed_reachable(mutator.rmap, seed_sc) if cfg.feedback in GUIDED else ()
         own = self._own_cells(mutator.rmap) if reach else ()
         peers = self._peer_view() if reach else None  # what the other jobs reached in their earlier lineages
+        buildable = functools.cache(lambda c: can_aim(mutator.rmap, seed_sc, c, self.si))  # once per cell, not cycle
         misses: dict[str, int] = dict(ckpt.get("aim_misses") or {})  # per cell: aimed builds that missed it
 
         while True:
@@ -312,8 +314,7 @@ class SeedJob:
             members: list[tuple[dict[str, Any], Any]] = []
             seen = {effect_hash(parent)}
             elsewhere = self._elsewhere(peers, lin.number) if peers is not None else ()
-            aim = aim_cells(reach, schedule.cells, misses, own, elsewhere,  # its unreached cells (guided feedback)
-                            lambda c: can_aim(mutator.rmap, seed_sc, c, self.si))
+            aim = aim_cells(reach, schedule.cells, misses, own, elsewhere, buildable)  # its unreached cells
             for member in range(cfg.population):
                 t0 = time.perf_counter()
                 key = f"{self.si}/{lin.number}/{lin.cycle}/{member}"
