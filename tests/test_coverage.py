@@ -29,6 +29,7 @@ from drivefuzz.triage.coverage import (
     close_encounters,
     execution_cells,
     format_coverage,
+    link_turn,
     reachable,
     split,
     summarise,
@@ -171,6 +172,8 @@ def test_reachable_cells_follow_the_network_and_the_routes(offered):
     assert not has("roundabout", "lane_change") and has("highway", "lane_change")  # the ring has one lane
     assert not has("highway", "vehicle/crossing") and has("town", "vehicle/crossing_right")
     assert not has("highway", "turn_left") and has("town", "turn_left")
+    # a turn is where the road bends 30 degrees within 3 s of driving: not the highway's off-ramp
+    assert not has("highway", "|turn_right") and has("interchange", "|turn_right")
     # speed bands up to the routes' limits: 50 km/h streets, 120 km/h motorway
     assert not has("town", "60+ km/h") and has("highway", "60+ km/h")
     # per place: a party and a column count together only where one place of a route has both
@@ -180,6 +183,21 @@ def test_reachable_cells_follow_the_network_and_the_routes(offered):
     for net, cells in offered.items():
         assert {split(c)[0] for c in cells} == set(PROJECTIONS), net
         assert {f"speed-condition:10-30 km/h|{c}" for c in CONDITIONS} <= cells, net
+
+
+def test_a_turn_is_where_the_road_bends_as_far_as_the_manoeuvre_counts_one():
+    highway = load_roadmap(ROOT / "networks" / "highway.net.xml")
+    ramp = highway.edge("hw1-AddedOffRampEdge")
+    # SUMO calls the off-ramp a right turn; it bends 23 degrees over the 110 m driven in 3 s at 1.1 x its limit
+    assert {c.getDirection() for c in ramp.getConnections(highway.edge("offramp"))} == {"R"}
+    assert link_turn(highway, "hw1-AddedOffRampEdge", "offramp") is None
+    # the lane added before it shifts its centre line 3.6 m over 8 m: a jog, not a turn
+    assert link_turn(highway, "hw1", "hw1-AddedOffRampEdge") is None
+    town = load_roadmap(ROOT / "networks" / "town.net.xml")
+    assert link_turn(town, "A1B1", "B1B0") == "turn_right" and link_turn(town, "A1B1", "B1B2") == "turn_left"
+    assert link_turn(town, "B1B0", "B0C0") == "turn_left"  # 30 km/h: 27 m in 3 s is enough
+    roundabout = load_roadmap(ROOT / "networks" / "roundabout.net.xml")
+    assert link_turn(roundabout, "ringNW", "Wout") is None  # leaving the ring is the roundabout's
 
 
 def test_summarise_counts_reached_cells_findings_incidents_and_aims():

@@ -140,6 +140,34 @@ def test_the_mutator_aims_only_when_told_and_the_same_rng_gives_the_same_member(
     assert not any(m.description.startswith("aim ") for m in plain)
 
 
+def test_a_member_draws_another_cell_where_the_mission_cannot_offer_the_first(mut, town_seeds):
+    # town seed 002's route has no ramp and no ring: a cell of those can never be built on it, and a member that
+    # drew one added a random or catalogue component instead (28 % of the aimed draws on the interchange's seeds)
+    sc = town_seeds[2]
+    never = "party-manoeuvre:vehicle/ahead|merge"
+    assert aimed(mut, sc, never, random.Random(0))[0].scenario is sc
+    cell = "party-manoeuvre:vehicle/behind|cruise"  # a follower: built on every draw on this mission
+    members = [mut.successor(sc, "all", random.Random(k), aim=[never, cell]) for k in range(12)]
+    assert all(m.description.startswith(f"aim {cell}: ") for m in members)
+    # none drawn at all when no aimed cell can be built: the member is an unaimed component, not the parent
+    members = [mut.successor(sc, "all", random.Random(k), aim=[never]) for k in range(6)]
+    assert all(not m.description.startswith("aim ") and m.scenario is not sc for m in members)
+
+
+def test_a_parent_with_as_many_actors_as_a_scenario_may_have_is_aimed_at_on_the_mission_alone(town_seeds):
+    sc = town_seeds[2]
+    small = Mutator(load_roadmap(sc.network_path()), MutationConfig(max_actors=2, target_share=0.0))
+    parent = sc
+    for k in range(8):
+        parent = small.successor(parent, "all", random.Random(f"parent/{k}")).scenario
+    assert len(parent.actors) == 2
+    cell = "party-manoeuvre:vehicle/behind|cruise"
+    members = [small.successor(parent, "all", random.Random(k), aim=[cell]) for k in range(8)]
+    assert all(m.description.startswith(f"aim {cell}: ") and "on the bare mission" in m.description
+               for m in members)
+    assert all(len(m.scenario.actors) <= 2 for m in members)
+
+
 def test_half_the_aimed_components_are_built_on_the_mission_alone(mut, town_seeds):
     # on a lineage's parent the other actors stop, slow and meet the ego first: the place and timing, read from
     # the ego's profile on an empty road, were off (cell hits 7-9 % in campaigns; on the bare seed 7 of 8 for a

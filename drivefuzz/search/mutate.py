@@ -380,15 +380,22 @@ class Mutator(RoutePlacement):
             if m.scenario is not sc:
                 return m
         u = rng.random()  # drawn whether or not there is an aim: a job without one keeps the same streams
-        if aim and strategy in ("all", "mix") and len(sc.actors) < self.cfg.max_actors and u < self.cfg.aim_share:
-            from drivefuzz.search.aim import aimed, pick_cell
+        if aim and strategy in ("all", "mix") and u < self.cfg.aim_share:
+            from drivefuzz.search.aim import AIM_DRAWS, aimed, pick_cell
 
-            m, weather_set = aimed(self, sc, pick_cell(aim, rng), rng)
-            if m.scenario is not sc:
-                if weather_set:
-                    return m
-                w, wdesc = self._mutate_weather(m.scenario.weather, rng)
-                return Mutation(m.scenario.model_copy(update={"weather": w}), f"{m.description}; {wdesc}", m.retries)
+            cells = sorted(aim)
+            for _ in range(AIM_DRAWS):  # a cell the mission cannot offer now: another, before a component unaimed
+                cell = pick_cell(cells, rng)
+                m, weather_set = aimed(self, sc, cell, rng)
+                if m.scenario is not sc:
+                    if weather_set:
+                        return m
+                    w, wdesc = self._mutate_weather(m.scenario.weather, rng)
+                    return Mutation(m.scenario.model_copy(update={"weather": w}), f"{m.description}; {wdesc}",
+                                    m.retries)
+                cells.remove(cell)
+                if not cells:
+                    break
         from drivefuzz.search.catalogue import SITUATIONS, add_situation
 
         if strategy in ("all", "mix") and rng.random() < self.cfg.catalogue_share and len(sc.actors) < self.cfg.max_actors:
