@@ -16,6 +16,7 @@ from drivefuzz.search.aim_place import (drawn_level, follower_at, meeting, passe
 from drivefuzz.search.fairness import inserted_within_reach, unfair
 from drivefuzz.search.mutate import Mutator
 from drivefuzz.search.risk import risk_score
+from drivefuzz.errors import SimulationError
 from drivefuzz.sim.execute import execute
 from drivefuzz.triage.coverage import classify, close_encounters, execution_cells
 
@@ -605,6 +606,30 @@ def test_an_ego_that_enters_at_speed_drives_in_the_band_a_short_route_never_reac
         assert speed_band(float(ex.trace["speed"][1])) == "60+ km/h", (k, float(ex.trace["speed"][1]))
         moving += 1
     assert moving >= 5
+
+
+def test_an_ego_entering_at_speed_can_stop_where_its_start_lane_does_not_go_on():
+    """SUMO inserts no vehicle that could not stop before a junction its lane does not take it through ("will not
+    be able to depart ... junction too close"): the ego entering the highway's added lane beside the off-ramp lane
+    60 m in, at 27.5 m/s, on a route to the off-ramp, was never inserted and the run was an error. Such a start is
+    not built; on a route straight on, through the junction with the right of way, it is, and runs."""
+    from drivefuzz.scenario.seed import list_seeds
+    from drivefuzz.scenario.sumofiles import read_scenario
+    from drivefuzz.search.aim_place import started_at_speed
+
+    from tests.conftest import ROOT
+
+    seeds = [read_scenario(p) for p in list_seeds(ROOT / "seeds" / "highway")]
+    mut = Mutator(load_roadmap(seeds[0].network_path()))
+    on = {"start_lane": "hw1-AddedOffRampEdge_1", "start_pos": 60.0}
+    straight = seeds[2].model_copy(update={"mission": seeds[2].mission.model_copy(update=on)})  # to hw2
+    off = seeds[11].model_copy(update={"mission": seeds[11].mission.model_copy(update={**on, "start_speed": 0.0})})
+    assert straight.mission.goal_edge == "hw2" and off.mission.goal_edge == "offramp"
+    with pytest.raises(SimulationError, match="could not insert the ego"):
+        execute(off.model_copy(update={"mission": off.mission.model_copy(update={"start_speed": 27.5})}))
+    assert all(started_at_speed(mut, off, 16.7, 99.0, random.Random(k)) is None for k in range(8))
+    new, _ = started_at_speed(mut, straight, 16.7, 99.0, random.Random(0))
+    assert new.mission.start_speed > 20.0 and float(run(new).trace["speed"][1]) > 16.7
 
 
 def test_an_oncoming_car_aimed_at_a_lane_change_passes_after_the_ego_moved_left(mut, town_seeds):

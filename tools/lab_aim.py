@@ -29,6 +29,8 @@ def main() -> None:
     ap.add_argument("--network", default="town", help="committed seed set [town]")
     ap.add_argument("--cells", default="", help="only cells whose key contains this [all]")
     ap.add_argument("--draws", type=int, default=3, help="aimed draws per seed and cell [3]")
+    ap.add_argument("--verbose", action="store_true", help="each build: what was built, and its run's cells of "
+                    "the aimed row (party) or column (condition)")
     args = ap.parse_args()
 
     from drivefuzz.ads import load_ads
@@ -60,7 +62,15 @@ def main() -> None:
                     continue
                 built[cell] += 1
                 trace = execute(m.scenario, ads=ads, oracles=[]).trace
-                hits[cell] += cell in execution_cells(m.scenario, trace, rmap, risk_score(trace))
+                cells = execution_cells(m.scenario, trace, rmap, risk_score(trace))
+                hits[cell] += cell in cells
+                if args.verbose:
+                    proj, row_col = cell.split(":", 1)
+                    row, col = row_col.split("|", 1)
+                    key = f"{proj}:{row}|" if proj != "speed-condition" else f"|{col}"
+                    near = sorted(c.split(":", 1)[1] for c in cells if key in c and c.startswith(proj))
+                    print(f"    seed {si:03d} {'HIT ' if cell in cells else 'miss'} {m.description[:150]}\n"
+                          f"        reached: {', '.join(near) or '-'}")
     print(f"{args.network}, cells with '{args.cells}': draws {sum(draws.values())}, built {sum(built.values())}, "
           f"reached their cell {sum(hits.values())}")
     for c in sorted(draws):

@@ -51,7 +51,7 @@ from drivefuzz.search import catalogue as cat
 from drivefuzz.search import programs as prog
 from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
-from drivefuzz.search.aim_place import (JUNCTION_COLUMNS, drawn_level, follower_at, grip_at, into_lane,
+from drivefuzz.search.aim_place import (GRIP_ACCEL_LENGTH_M, JUNCTION_COLUMNS, drawn_level, follower_at, grip_at, into_lane,
                                         lane_change_moves, meeting, passes, profile_spots, shifted_start,
                                         started_at_speed, stopped_past, walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
@@ -273,6 +273,8 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
     side = "left" if approach.endswith("left") else "right" if approach.endswith("right") else None
     if kind == "none":  # a patch where the column puts the ego; the catalogue's lies before a random light or turn
         if at is not None:  # of the route (tools/lab_aim.py on town, 3 draws: 39 of 270 reached their cell, now 121)
+            if col == "accelerate":  # a short patch at the place itself
+                return [Situation("grip", "", partial(grip_at, at=at, length_m=GRIP_ACCEL_LENGTH_M, before_m=2.0))]
             return [Situation("grip", "", partial(grip_at, at=at))]
         return [Situation("grip", "", cat.slippery_braking_zone)]
     if kind == "pedestrian":

@@ -35,11 +35,15 @@ from drivefuzz.search import catalogue as cat
 from drivefuzz.search import programs as prog
 from drivefuzz.search.fairness import lane_limit
 from drivefuzz.search.mutate import Mutator
+from drivefuzz.sim.world import SUMO_DECEL
 
 #: [m] the element is ``edge`` only this far from a junction (coverage reads a junction within 30 m)
 EDGE_CLEAR_M = 35.0
 #: [m/s^2] the profile's acceleration above / below which the ego accelerates / brakes (coverage: 0.7, -1.0)
 ACCEL, BRAKE = 0.7, -1.0
+#: [s] after a standstill within which an aimed acceleration, braking or cruise would be met in stop and go: the
+#: 3 s coverage reads a manoeuvre over, and half a second for the encounter's frame
+STOP_GO_S = 3.5
 #: share of the followers built to close in, and [s] the time gaps they follow at (``follow`` steps)
 TAILGATE_SHARE, TAILGATE_S = 0.5, (MIN_FOLLOW_S, 0.9)
 #: [s] the time to collision at which a close-in follower brakes (a close step, ``MIN_CLOSE_TTC`` at least)
@@ -150,13 +154,25 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random) -> tuple[Scena
     return new, f"{SHIFTED_START} {lane_id} (was {m.start_lane}): its route makes it change lanes"
 
 
+#: link states (SUMO's) through which a car entering at speed need not be able to stop: major, or uncontrolled
+FREE_LINKS = ("M", "O", "o")
+
+
 def started_at_speed(mut: Mutator, sc: Scenario, lo: float, hi: float,
                      rng: random.Random) -> tuple[Scenario, str] | None:
     """(``sc`` with the ego entering at a speed inside the band ``lo``-``hi`` [m/s]; what was done), None where its
-    start lane's limit does not allow one (at most 0.95 of it). For a speed band that a route too short to speed up
+    start lane's limit does not allow one (at most 0.95 of it), or, where that lane does not go on into the route's
+    next edge with the right of way, the room to stop before its end. For a speed band that a route too short to speed up
     on never reaches: the ego is already moving at the start, as on a motorway it joined before."""
-    limit = mut.rmap.lane(sc.mission.start_lane).getSpeed()
-    top = min(0.9 * hi, 0.95 * limit)
+    lane = mut.rmap.lane(sc.mission.start_lane)
+    top = min(0.9 * hi, 0.95 * lane.getSpeed())
+    route = mut._route(sc)
+    if len(route) > 1 and not any(c.getTo().getID() == route[1] and c.getState() in FREE_LINKS
+                                  for c in lane.getOutgoing()):
+        # it must stop or change lanes before the junction ahead; SUMO inserts no car that could not stop there
+        # ("will not be able to depart ... (junction too close)": the run was an error)
+        room = max(lane.getLength() - sc.mission.start_pos, 0.0)
+        top = min(top, 0.95 * math.sqrt(2.0 * SUMO_DECEL * room))
     if top <= 1.1 * lo or sc.mission.start_speed >= lo:
         return None
     v = round(rng.uniform(1.1 * lo, top), 2)
@@ -205,18 +221,25 @@ def into_lane(mut: Mutator, sc: Scenario, rng: random.Random, move: tuple[float,
 GRIP_BEFORE_M, GRIP_LENGTH_M = 20.0, (25.0, 35.0)
 #: friction of a patch aimed at a place: ice (an accelerating or lane-changing ego uses 1 m/s^2 of it at most)
 GRIP_MU = (0.05, 0.15)
+#: [m] length of a patch aimed where the ego accelerates (GRIP_MU): crossed within a second, so that its driven
+#: wheels spin and grip again while the last second's mean acceleration is still over the 0.7 m/s^2 coverage counts.
+#: On a 25-35 m patch the reference ADS gained 0.34 m/s^2 on ice, and at mu 0.37, 1.5 m/s^2 with 0.54 of its grip
+#: (the driven axle carries part of the weight): a cruise, or no encounter.
+#: `python tools/lab_aim.py --network interchange --cells "none/grip|accelerate" --draws 2` reached 1 of 16
+GRIP_ACCEL_LENGTH_M = (3.0, 6.0)
 
 
-def grip_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
+def grip_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float,
+            length_m: tuple[float, float] = GRIP_LENGTH_M, before_m: float = GRIP_BEFORE_M):
     """A low-friction patch (:data:`GRIP_MU`) across the ego's lane and the lanes beside it, from
     :data:`GRIP_BEFORE_M` before the route distance ``at`` [m]: the ego changes lanes, brakes, turns (or drives on)
     on it there.
     (From 5 m before, mu 0.05-0.3: the ego had changed lanes when it came to it, and used a third of its grip.)"""
-    spot = cat._route_spot(mut, sc, max(at - GRIP_BEFORE_M, 0.0))
+    spot = cat._route_spot(mut, sc, max(at - before_m, 0.0))
     if spot is None:
         return None
     _, lane, pos = spot
-    length = rng.uniform(*GRIP_LENGTH_M)
+    length = rng.uniform(*length_m)
     x, y, h = mut.rmap.geom(lane).position(pos + length / 2.0)
     p = Puddle(x=round(x, 2), y=round(y, 2), length=round(length, 2), width=round(rng.uniform(6.0, 8.0), 2),
                rotation=round(h, 3), friction=round(rng.uniform(*GRIP_MU), 2))
@@ -241,9 +264,30 @@ def profile_spots(mut: Mutator, sc: Scenario, col: str, band: tuple[float, float
                 "cruise": (np.abs(a) < 0.3) & (v > 3.0)}[col]
     if col == "stop_go" or (col == "speed" and band[0] <= 0.0):  # a stop: the steps just before it count too
         want = want | (np.concatenate([want[1:], [False]]))
+    elif col in ("accelerate", "brake", "cruise"):  # not where the manoeuvre counts as stop and go
+        want = want & ~_after_standstill(t, v, sc.mission.start_speed)
     goal = 0.8 * _goal(mut, sc)
     picked = sorted({round(float(x) / 5.0) * 5.0 for x in s[:-1][want] if 1.0 <= x <= goal})
     return picked
+
+
+def _after_standstill(t: np.ndarray, v: np.ndarray, start_speed: float) -> np.ndarray:
+    """Per metre of the profile (reached at ``t[k]`` [s], driven at ``v[k]`` [m/s] on to ``t[k + 1]``): whether the
+    ego stood within :data:`STOP_GO_S` before it: at its start (``start_speed`` under
+    :data:`~drivefuzz.triage.coverage.STANDSTILL`), or on a metre it took longer than 1 / STANDSTILL s to drive (a
+    wait at a light), counted from the end of that metre. There an encounter's manoeuvre is ``stop_go``
+    (:func:`drivefuzz.triage.coverage.manoeuvre` reads the 3 s before it): of the interchange's aimed
+    accelerations, the first 3 s after the standing start, two or three of each seed's nine to fourteen places,
+    could only be met in stop and go."""
+    from drivefuzz.triage.coverage import STANDSTILL
+
+    stood = t[1:][v < STANDSTILL]
+    if start_speed < STANDSTILL:
+        stood = np.concatenate(([t[0]], stood))
+    if not len(stood):
+        return np.zeros(len(v), dtype=bool)
+    k = np.searchsorted(stood, t[:-1], side="right") - 1  # the last standstill at or before each metre
+    return (k >= 0) & (t[:-1] - stood[np.maximum(k, 0)] <= STOP_GO_S)
 
 
 #: per aimed phase: the states whose onset is shifted, the range [s] of how long before the ego arrives that onset
