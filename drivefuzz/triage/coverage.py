@@ -369,14 +369,15 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
     whether it is multi-lane, its limit, and the parties that can meet the ego there."""
     feats = _features(rmap)
     out: list[dict[str, Any]] = []
-    done: set[tuple[str, str]] = set()
+    done: set[tuple[str, str, str]] = set()
     for sc in scenarios:
         route = rmap.route(sc.mission.start_edge, sc.mission.goal_edge) or (sc.mission.start_edge,)
         for i, eid in enumerate(route):
             nxt = route[i + 1] if i + 1 < len(route) else ""
-            if (eid, nxt) in done:
+            before = route[i - 1] if i else ""
+            if (before, eid, nxt) in done:
                 continue
-            done.add((eid, nxt))
+            done.add((before, eid, nxt))
             edge = rmap.edge(eid)
             lanes = edge.getLanes()
             drive = [ln for ln in lanes if ln.allows("passenger")]
@@ -384,20 +385,23 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
             link: dict[str, Any] = {"elements": set(), "turns": set(), "crossing": False}
             if nxt:
                 _link_features(rmap, edge, rmap.edge(nxt), node, link)
-            parties = {"vehicle/ahead", "vehicle/behind", "none/grip"}
+            parties = {"vehicle/ahead", "vehicle/behind", "none/grip"} | _road_parties(edge)
             multilane = len(drive) >= 2
-            if multilane:
-                parties |= {f"vehicle/{a}" for a in ("left", "right", "rear_left", "rear_right")}
-            if _has_opposite(edge):
-                parties.add("vehicle/oncoming")
             if link["crossing"]:
                 parties |= {"vehicle/crossing_left", "vehicle/crossing_right"}
             sidewalk = any(ln.allows("pedestrian") and not ln.allows("passenger") for ln in lanes)
-            if sidewalk or node.getID() in _crossing_nodes(rmap):
+            if node.getID() in _crossing_nodes(rmap):
                 parties |= {f"pedestrian/{a}" for a in PEDESTRIAN_APPROACHES}
             element = ("roundabout" if eid in feats["ring_edges"] else "ramp" if eid in feats["ramp_edges"] else None)
             vmax = max((ln.getSpeed() for ln in drive), default=0.0)
             base = {"multilane": multilane, "vmax": vmax, "parties": parties, "node": node.getID()}
+            if before in feats["ring_edges"] and eid not in feats["ring_edges"]:  # off the ring: the turn out of
+                out_turn = link_turn(rmap, before, eid)  # it counts on this road, with this road's parties and
+                if out_turn:  # the traffic going on round the ring across its way out
+                    exit_node = edge.getFromNode()
+                    ring_on = any(o.getID() in feats["ring_edges"] for o in exit_node.getOutgoing())
+                    out.append(dict(base, element=None, turn=out_turn, node=exit_node.getID(), parties=parties | (
+                        {"vehicle/crossing_left", "vehicle/crossing_right"} if ring_on else set())))
             if element:  # a ring or ramp edge: its own element (and the manoeuvre it implies), no turns
                 if not sidewalk:  # nobody walks on a ring or a ramp without a pavement
                     base["parties"] = {p for p in parties if not p.startswith("pedestrian/")}
@@ -406,9 +410,24 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
                     continue
             controls = sorted(link["elements"]) or [None]
             turns = sorted(link["turns"]) or [None]
+            into = _road_parties(rmap.edge(nxt)) if nxt else set()  # a turn counts on the road it leads into too
             for control in controls:
                 for turn in turns:
-                    out.append(dict(base, element=control, turn=turn))
+                    out.append(dict(base, element=control, turn=turn) if turn is None else
+                               dict(base, element=control, turn=turn, parties=parties | into))
+    return out
+
+
+def _road_parties(edge) -> set[str]:
+    """Who can be beside or come towards the ego on ``edge``: the sides and rear quarters on a road of several
+    lanes for cars, oncoming cars where a road runs the other way, walkers where it has a pavement."""
+    out = set()
+    if sum(1 for ln in edge.getLanes() if ln.allows("passenger")) >= 2:
+        out |= {f"vehicle/{a}" for a in ("left", "right", "rear_left", "rear_right")}
+    if _has_opposite(edge):
+        out.add("vehicle/oncoming")
+    if any(ln.allows("pedestrian") and not ln.allows("passenger") for ln in edge.getLanes()):
+        out |= {f"pedestrian/{a}" for a in PEDESTRIAN_APPROACHES}
     return out
 
 
@@ -450,17 +469,27 @@ def _link_features(rmap, edge, nxt, node, out: dict[str, Any]) -> None:
 @lru_cache(maxsize=4096)
 def link_turn(rmap, edge_id: str, next_id: str) -> str | None:
     """``turn_left`` / ``turn_right`` where the ego can turn through the link from ``edge_id`` to ``next_id`` as
-    :func:`manoeuvre` counts a turn: its path (the lane's end, the junction's internal lane, the next lane's start)
-    bends by :data:`TURN` or more within the distance driven in :data:`WINDOW_S` at 1.1 x the faster lane's limit;
-    else None. Not on a roundabout's ring (every frame there is the roundabout). SUMO's link direction is not
-    enough: the highway's off-ramp is a right turn to SUMO and bends 23 degrees over those 110 m."""
-    if edge_id in _features(rmap)["ring_edges"]:
-        return None
+    :func:`manoeuvre` counts a turn: its path (the lane, the junction's internal lanes, the next lane) bends by
+    :data:`TURN` or more within the distance driven in :data:`WINDOW_S` at 1.1 x the faster lane's limit, that
+    distance ending off a roundabout's ring and its junctions (there every frame is the roundabout); else None.
+    SUMO's link direction is not enough: the highway's off-ramp is a right turn to SUMO and bends 23 degrees over
+    those 110 m; a roundabout's entry is a right turn to SUMO and counts as the roundabout as soon as the ego
+    turns; its exit is part of the ring to SUMO and counts as a turn on the road out."""
+    feats = _features(rmap)
+
+    def counted(lane_id: str) -> bool:
+        edge = rmap.lane(lane_id).getEdge()
+        if edge.getFunction() == "internal":
+            return edge.getID().lstrip(":").rsplit("_", 1)[0] not in feats["ring_nodes"]
+        return edge.getID() not in feats["ring_edges"]
+
     best = 0.0
     for frm, to, via in rmap.connections(edge_id, next_id):
         reach = WINDOW_S * 1.1 * max(rmap.lane(frm).getSpeed(), rmap.lane(to).getSpeed())
-        path = [rmap.geom(frm).pts] + [rmap.geom(lid).pts for lid in rmap.internal_chain(via)] + [rmap.geom(to).pts]
-        bend = _max_bend(np.concatenate(path), reach)
+        lanes = [frm, *rmap.internal_chain(via), to]
+        parts = [rmap.geom(lid).pts for lid in lanes]
+        flags = [np.full(len(p), counted(lid)) for p, lid in zip(parts, lanes)]
+        bend = _max_bend(np.concatenate(parts), reach, np.concatenate(flags))
         if abs(bend) > abs(best):
             best = bend
     if abs(best) < TURN:
@@ -468,22 +497,25 @@ def link_turn(rmap, edge_id: str, next_id: str) -> str | None:
     return "turn_left" if best > 0 else "turn_right"
 
 
-def _max_bend(xy: np.ndarray, reach: float, chord: float = 10.0) -> float:
-    """[rad] the largest heading change (signed, left positive) along the polyline ``xy`` between two of its
-    ``chord``-m chords that begin ``reach`` m apart or nearer. Chords, not segments: a lane that widens shifts its
-    centre line 3.6 m over 8 m (38 degrees), which no car follows at speed and which turns nobody."""
+def _max_bend(xy: np.ndarray, reach: float, counted: np.ndarray, chord: float = 10.0) -> float:
+    """[rad] the largest heading change (signed, left positive) along the polyline ``xy`` from one of its
+    ``chord``-m chords to one that begins up to ``reach`` m further on, at a point where ``counted`` (per point of
+    ``xy``; a metre takes its segment's start). Chords, not segments: a lane that widens shifts its centre line
+    3.6 m over 8 m (38 degrees), which no car follows at speed and which turns nobody."""
     d = np.diff(xy, axis=0)
     cum = np.concatenate(([0.0], np.cumsum(np.hypot(d[:, 0], d[:, 1]))))
     if cum[-1] <= chord:
         return 0.0
     s = np.arange(0.0, cum[-1] + 1e-9, 1.0)  # every metre
     x, y = np.interp(s, cum, xy[:, 0]), np.interp(s, cum, xy[:, 1])
+    ok = counted[np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(counted) - 1)]
     n = int(chord)
     heading = np.unwrap(np.arctan2(y[n:] - y[:-n], x[n:] - x[:-n]))
+    ok = ok[n:]  # a chord counts where it ends
     span = max(int(reach), 1)
     best = 0.0
-    for i in range(len(heading)):
-        window = heading[i:i + span + 1] - heading[i]
+    for j in np.flatnonzero(ok):
+        window = heading[j] - heading[max(j - span, 0):j + 1]
         k = int(np.argmax(np.abs(window)))
         if abs(window[k]) > abs(best):
             best = float(window[k])
