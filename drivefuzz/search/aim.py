@@ -51,8 +51,8 @@ from drivefuzz.search import catalogue as cat
 from drivefuzz.search import programs as prog
 from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
-from drivefuzz.search.aim_place import (GRIP_ACCEL_LENGTH_M, JUNCTION_COLUMNS, drawn_level, follower_at, grip_at, into_lane,
-                                        lane_change_moves, meeting, passes, profile_spots, shifted_start,
+from drivefuzz.search.aim_place import (GRIP_ACCEL_LENGTH_M, JUNCTION_COLUMNS, drawn_level, follower_at, grip_at,
+                                        into_lane, lane_change_moves, meeting, passes, profile_spots, shifted_start,
                                         started_at_speed, stopped_past, walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 

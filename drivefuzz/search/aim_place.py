@@ -162,8 +162,8 @@ def started_at_speed(mut: Mutator, sc: Scenario, lo: float, hi: float,
                      rng: random.Random) -> tuple[Scenario, str] | None:
     """(``sc`` with the ego entering at a speed inside the band ``lo``-``hi`` [m/s]; what was done), None where its
     start lane's limit does not allow one (at most 0.95 of it), or, where that lane does not go on into the route's
-    next edge with the right of way, the room to stop before its end. For a speed band that a route too short to speed up
-    on never reaches: the ego is already moving at the start, as on a motorway it joined before."""
+    next edge with the right of way, the room to stop before its end. For a speed band that a route too short to
+    speed up on never reaches: the ego is already moving at the start, as on a motorway it joined before."""
     lane = mut.rmap.lane(sc.mission.start_lane)
     top = min(0.9 * hi, 0.95 * lane.getSpeed())
     route = mut._route(sc)
@@ -225,7 +225,8 @@ GRIP_MU = (0.05, 0.15)
 #: wheels spin and grip again while the last second's mean acceleration is still over the 0.7 m/s^2 coverage counts.
 #: On a 25-35 m patch the reference ADS gained 0.34 m/s^2 on ice, and at mu 0.37, 1.5 m/s^2 with 0.54 of its grip
 #: (the driven axle carries part of the weight): a cruise, or no encounter.
-#: `python tools/lab_aim.py --network interchange --cells "none/grip|accelerate" --draws 2` reached 1 of 16
+#: `python tools/lab_aim.py --network interchange --cells "none/grip|accelerate" --draws 2`: 1 of 16 reached the
+#: cell on that patch, 9 on this one
 GRIP_ACCEL_LENGTH_M = (3.0, 6.0)
 
 
