@@ -383,7 +383,7 @@ class Mutator(RoutePlacement):
         if aim and strategy in ("all", "mix") and u < self.cfg.aim_share:
             from drivefuzz.search.aim import AIM_DRAWS, aimed, pick_cell
 
-            cells = sorted(aim)
+            cells = list(aim)
             for _ in range(AIM_DRAWS):  # a cell the mission cannot offer now: another, before a component unaimed
                 cell = pick_cell(cells, rng)
                 m, weather_set = aimed(self, sc, cell, rng)

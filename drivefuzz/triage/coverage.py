@@ -218,18 +218,23 @@ def element(scenario, trace, rmap, f: int) -> str:
     junction control of the signature's element (the link crossed or approached), else ``edge``."""
     feats = _features(rmap)
     lane = str(trace["lane"][f])
-    edge = lane.rsplit("_", 1)[0] if lane else ""
-    if lane.startswith(":"):
-        if edge.lstrip(":").rsplit("_", 1)[0] in feats["ring_nodes"]:
-            return "roundabout"
-    elif edge in feats["ring_edges"]:
+    if _on_ring(lane, feats):
         return "roundabout"
-    elif edge in feats["ramp_edges"]:
+    if not lane.startswith(":") and lane.rsplit("_", 1)[0] in feats["ramp_edges"]:
         return "ramp"
     cls = signature_element(scenario, trace, rmap, f).split("/", 1)[1]
     if cls == "traffic_light":
         return f"signal/{_phase(trace, f)}"
     return {"priority": "priority", "yield": "yield", "stop": "yield"}.get(cls, "edge")
+
+
+def _on_ring(lane_id: str, feats: Mapping[str, frozenset[str]]) -> bool:
+    """Whether ``lane_id`` lies on a roundabout's ring or inside one of its junctions (an internal lane is
+    ``:<node>_<i>_<j>``): every frame of the ego there is the roundabout (:func:`element`, :func:`link_turn`)."""
+    edge = lane_id.rsplit("_", 1)[0]
+    if lane_id.startswith(":"):
+        return edge.lstrip(":").rsplit("_", 1)[0] in feats["ring_nodes"]
+    return edge in feats["ring_edges"]
 
 
 def _phase(trace, f: int) -> str:
@@ -476,19 +481,12 @@ def link_turn(rmap, edge_id: str, next_id: str) -> str | None:
     those 110 m; a roundabout's entry is a right turn to SUMO and counts as the roundabout as soon as the ego
     turns; its exit is part of the ring to SUMO and counts as a turn on the road out."""
     feats = _features(rmap)
-
-    def counted(lane_id: str) -> bool:
-        edge = rmap.lane(lane_id).getEdge()
-        if edge.getFunction() == "internal":
-            return edge.getID().lstrip(":").rsplit("_", 1)[0] not in feats["ring_nodes"]
-        return edge.getID() not in feats["ring_edges"]
-
     best = 0.0
     for frm, to, via in rmap.connections(edge_id, next_id):
         reach = WINDOW_S * 1.1 * max(rmap.lane(frm).getSpeed(), rmap.lane(to).getSpeed())
         lanes = [frm, *rmap.internal_chain(via), to]
         parts = [rmap.geom(lid).pts for lid in lanes]
-        flags = [np.full(len(p), counted(lid)) for p, lid in zip(parts, lanes)]
+        flags = [np.full(len(p), not _on_ring(lid, feats)) for p, lid in zip(parts, lanes)]
         bend = _max_bend(np.concatenate(parts), reach, np.concatenate(flags))
         if abs(bend) > abs(best):
             best = bend
