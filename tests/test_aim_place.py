@@ -674,3 +674,27 @@ def test_a_start_on_another_lane_keeps_the_pace_the_ads_was_seen_driving(interse
     moving, _ = started_at_speed(mut, sc, 5.0, 8.3, random.Random(0))
     assert mut._ego_eta(shifted, 60.0) == mut._ego_eta(sc, 60.0) != model._ego_eta(sc, 60.0)
     assert mut._ego_eta(moving, 60.0) == model._ego_eta(moving, 60.0)
+
+
+def test_a_car_ahead_aimed_on_a_roundabout_stands_on_the_ring_and_is_met_there():
+    # the catalogue's cars ahead start 15-40 m ahead and slower than the ego: on a ring of 28 m edges the ego never
+    # closed up before they left it (1 of 111 aimed builds reached vehicle/ahead|roundabout)
+    from pathlib import Path
+
+    from drivefuzz.scenario.seed import list_seeds
+    from drivefuzz.scenario.sumofiles import read_scenario
+    from drivefuzz.search.aim import aimed
+
+    root = Path(__file__).resolve().parent.parent / "seeds" / "roundabout"
+    sc = read_scenario(list_seeds(root)[7])  # starts on the ring: the stand is past a later ring edge's start
+    mut = Mutator(load_roadmap(sc.network_path()))
+    cell = "party-element:vehicle/ahead|roundabout"
+    hits = 0
+    for k in range(4):
+        m, _ = aimed(mut, sc, cell, random.Random(k))
+        (a,) = m.scenario.actors[len(m.scenario.actors) - 1:]
+        assert a.start_lane.startswith("ring") and a.start_lane.rsplit("_", 1)[0] in mut._route(sc)
+        assert a.maneuvers[0].value == 0.0  # it stands, until after the ego is expected there
+        ex = run(m.scenario)
+        hits += cell in execution_cells(m.scenario, ex.trace, mut.rmap, risk_score(ex.trace))
+    assert hits >= 3

@@ -53,7 +53,8 @@ from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
 from drivefuzz.search.aim_place import (GRIP_ACCEL_LENGTH_M, JUNCTION_COLUMNS, drawn_level, follower_at, grip_at,
                                         into_lane, lane_change_moves, meeting, passes, profile_spots, shifted_start,
-                                        started_at_speed, stopped_past, walker_from_left)
+                                        started_at_speed, stopped_on_ring, stopped_past,
+                                        walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 
 #: [m] an actor this far before a junction (along the ego's route) meets the ego at it
@@ -298,6 +299,8 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
                           partial(_on_side, mut, sc, side))]
     if approach == "ahead" and col in ("turn_left", "turn_right") and at is not None:
         return [Situation("stopped_past", "", partial(stopped_past, at=at))]
+    if approach == "ahead" and col == "roundabout":  # standing on the ring, past where the ego comes onto an edge
+        return [Situation("stopped_past", "", stopped_on_ring)]
     if approach == "ahead" and col == "lane_change" and at is not None:  # standing on the lane it changes into
         return [Situation("stopped_past", "", partial(stopped_past, at=at, past=STANDING_PAST_CHANGE_M))]
     if approach == "ahead":

@@ -56,6 +56,10 @@ STAND_DECEL = 8.0
 JUNCTION_COLUMNS = ("signal/green", "signal/amber", "signal/red", "priority", "yield", "turn_left", "turn_right")
 
 
+#: [m] from the ego's start that a ring edge must begin for a car to stand on it (:func:`stopped_on_ring`)
+RING_ENTRY_CLEAR_M = 10.0
+
+
 def meeting(mut: Mutator, sc: Scenario, col: str, rng: random.Random) -> tuple[Scenario, float | None, str]:
     """(the scenario, with a light shifted where the column asks for its phase; the route distance [m] where the
     encounter should happen, None when the column does not say or the route has no such place; what was done)."""
@@ -536,6 +540,20 @@ def stopped_past(mut: Mutator, sc: Scenario, rng: random.Random, at: float,
     a = cat.Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=lane,
                   start_pos=round(max(pos - roll, 1.0), 2), speed=speed, dest_edge=cat._dest(mut, sc), maneuvers=steps)
     return [a], [], {}, (f"vehicle {a.id} standing on {lane} @ {pos:.1f} m, just past the turn, until {release} s")
+
+
+def stopped_on_ring(mut: Mutator, sc: Scenario, rng: random.Random):
+    """A vehicle standing on a ring edge of the route, 4-14 m past where the ego comes onto it (from the approach or
+    from the ring edge before): the end of a queue on the ring, met while the ego still drives round (its heading
+    turns all the way on a ring, so the coverage's manoeuvre is the roundabout until it stops). (The catalogue's
+    vehicles ahead start 15-40 m ahead of the ego, slower than it: on a ring it leaves before the ego closes up.
+    ``python tools/lab_aim.py --network roundabout --cells "ahead|roundabout"``: 1 of 111 builds reached.)"""
+    from drivefuzz.search.aim import _marks
+
+    starts = [s0 for s0, _ in _marks(mut, sc)["rings"] if s0 >= RING_ENTRY_CLEAR_M]
+    if not starts:  # the ego starts on the route's last ring edge, or its route has none
+        return None
+    return stopped_past(mut, sc, rng, at=rng.choice(starts) + 0.5)
 
 
 def walker_from_left(mut: Mutator, sc: Scenario, rng: random.Random, early=(-1.0, 1.5), at: float | None = None):
