@@ -11,6 +11,7 @@ import pytest
 
 from drivefuzz.scenario import Actor, ActorKind, NavType
 from drivefuzz.scenario.roadmap import load_roadmap
+from drivefuzz.search.aim import _marks
 from drivefuzz.search.aim_place import (drawn_level, follower_at, meeting, passes, profile_spots, shift_light,
                                         walker_from_left)
 from drivefuzz.search.fairness import inserted_within_reach, unfair
@@ -698,3 +699,14 @@ def test_a_car_ahead_aimed_on_a_roundabout_stands_on_the_ring_and_is_met_there()
         ex = run(m.scenario)
         hits += cell in execution_cells(m.scenario, ex.trace, mut.rmap, risk_score(ex.trace))
     assert hits >= 3
+
+
+def test_a_follower_aimed_past_a_turn_comes_the_ego_s_way(intersection_seeds):
+    # its run-up starts upstream of the turn's exit: on a random incoming lane it came from another approach of the
+    # junction, and stood at that approach's red light while the ego turned
+    sc = intersection_seeds[3]  # a left turn from WC into CN
+    mut = Mutator(load_roadmap(sc.network_path()))
+    at = next(s for s, _, _, turn, _ in _marks(mut, sc)["junctions"] if turn == "turn_left") + 5.0
+    route = mut._route(sc)
+    starts = [follower_at(mut, sc, random.Random(k), at)[0][0].start_lane for k in range(6)]
+    assert all(s.rsplit("_", 1)[0] in route for s in starts), starts

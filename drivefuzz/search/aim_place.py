@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 import random
+from typing import Sequence
 
 import numpy as np
 
@@ -378,17 +379,18 @@ def _lanes_beside(mut: Mutator, ego_lane: str, side: str | None) -> list:
 
 
 def run_up(mut: Mutator, lane: str, pos: float, speed: float, lead: float, t_at: float,
-           rng: random.Random) -> tuple[str, float, float] | None:
+           rng: random.Random, route: Sequence[str] = ()) -> tuple[str, float, float] | None:
     """(lane, position [m], departure [s]) of a car at ``speed`` that is at ``pos`` on ``lane`` at ``t_at`` [s]
     after driving ``lead`` s (less where ``t_at`` is sooner: it starts further on at 0 s); where that run-up is
     longer than the lane before ``pos``, it starts upstream, on a lane that leads into ``lane`` (the highway's
-    edges after a ramp are 60-130 m long: a car at 30 m/s for 3 s does not fit on one). None where no road is
-    long enough."""
+    edges after a ramp are 60-130 m long: a car at 30 m/s for 3 s does not fit on one), on ``route`` where one
+    does (the ego's: a follower aimed just past a turn had come from another approach, and waited at its red
+    light). None where no road is long enough."""
     lead = min(lead, t_at)
     back = speed * lead
     if pos - back >= 1.0:
         return lane, round(pos - back, 2), round(t_at - lead, 1)
-    placed = mut._upstream(lane, pos, back, rng)
+    placed = mut._upstream(lane, pos, back, rng, route)
     if placed is None:
         return None
     up_lane, up_pos, covered = placed
@@ -423,7 +425,8 @@ def passes(mut: Mutator, sc: Scenario, rng: random.Random, at: float | None = No
     lead = rng.uniform(3.0, 7.0)  # [s] it drives before it draws level
     t_level = mut._ego_eta(sc, max(d - 0.5, 0.0)) + (rng.uniform(0.0, 4.0) if v_ego < 1.0 else 0.0)
     # its front at the ego's rear
-    placed = run_up(mut, lane.getID(), min(pos, lane.getLength() - 0.5) - EGO_LENGTH, speed, lead, t_level, rng)
+    placed = run_up(mut, lane.getID(), min(pos, lane.getLength() - 0.5) - EGO_LENGTH, speed, lead, t_level, rng,
+                    mut._route(sc))
     if placed is None:
         return None
     start_lane, start, depart = placed
@@ -495,7 +498,7 @@ def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
     else:
         lead = rng.uniform(4.0, 8.0)
         speed = round(min(prog.SPEED_SHARE[1] * limit, v_ego + rng.uniform(3.0, 6.0)), 2)
-    placed = run_up(mut, lane, pos - EGO_LENGTH - 2.0, speed, lead, t_meet, rng)
+    placed = run_up(mut, lane, pos - EGO_LENGTH - 2.0, speed, lead, t_meet, rng, mut._route(sc))
     if placed is None:
         return None
     start_lane, start, depart = placed

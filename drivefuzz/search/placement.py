@@ -13,6 +13,7 @@ from __future__ import annotations
 import math
 import random
 from functools import partial
+from typing import Sequence
 
 import numpy as np
 from shapely.geometry import LineString, Point
@@ -262,11 +263,12 @@ class RoutePlacement:
                 return sum(self.rmap.lane(v).getLength() for v in self._internal_chain(c.getViaLaneID()))
         return 0.0
 
-    def _upstream(self, lane_id: str, pos: float, back: float,
-                  rng: random.Random) -> tuple[str, float, float] | None:
+    def _upstream(self, lane_id: str, pos: float, back: float, rng: random.Random,
+                  route: Sequence[str] = ()) -> tuple[str, float, float] | None:
         """(lane, pos, driving distance [m]) about ``back`` metres of driving upstream of (lane_id, pos), through
         incoming passenger lanes and the junctions between them; at least ``back`` (an actor never stands
-        inside a junction). None when the road ends first."""
+        inside a junction). Where an incoming lane lies on an edge of ``route`` (the ego's), one of those: a car
+        that comes up behind the ego came its way. None when the road ends first."""
         covered = 0.0
         for _ in range(4):
             if pos - back >= 1.0:
@@ -276,7 +278,7 @@ class RoutePlacement:
                    if l.getEdge().getFunction() == "" and l.allows(PASSENGER)]
             if not ins:
                 return None
-            lane = rng.choice(ins)
+            lane = rng.choice([l for l in ins if l.getEdge().getID() in route] or ins)
             via = self._via_length(lane.getID(), lane_id)
             covered += pos + via
             back = max(back - pos - via, 0.0)
