@@ -710,3 +710,21 @@ def test_a_follower_aimed_past_a_turn_comes_the_ego_s_way(intersection_seeds):
     route = mut._route(sc)
     starts = [follower_at(mut, sc, random.Random(k), at)[0][0].start_lane for k in range(6)]
     assert all(s.rsplit("_", 1)[0] in route for s in starts), starts
+
+
+def test_a_car_aimed_beside_a_turn_stands_on_the_lane_beside_the_one_the_turn_leads_into(intersection_seeds):
+    # the catalogue's cars beside need the ego at 4 m/s or more, which it does not drive in a turn: none was built
+    from drivefuzz.search.aim import aimed
+
+    sc = intersection_seeds[0]  # a right turn from WC into CW's right lane (CW_1; CW_0 is a cycle lane)
+    mut = Mutator(load_roadmap(sc.network_path()))
+    cell = "party-manoeuvre:vehicle/left|turn_right"
+    hits = 0
+    for k in range(3):
+        m, _ = aimed(mut, sc, cell, random.Random(k))
+        assert [a.start_lane for a in m.scenario.actors[len(sc.actors):]] == ["CW_2"]
+        ex = run(m.scenario)
+        hits += cell in execution_cells(m.scenario, ex.trace, mut.rmap, risk_score(ex.trace))
+    assert hits >= 2
+    # where the turn leads into the outermost lane that cars use, there is none on that side: nothing is built
+    assert aimed(mut, sc, "party-manoeuvre:vehicle/right|turn_right", random.Random(0))[0].scenario is sc

@@ -313,6 +313,8 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
         return pool
     if approach == "behind":
         return [Situation("follower", "", follower if at is None else partial(follower_at, at=at))]
+    if approach in ("left", "right") and col in ("turn_left", "turn_right") and at is not None:
+        return [Situation("stopped_past", "", partial(stopped_past, at=at, side=side))]
     if approach in ("left", "right"):  # beside or ahead in the lane on that side, coming close
         keep = partial(_on_side, mut, sc, side)
         return [_filtered(s, keep) for s in (*prog.PROGRAMS, *cat.SITUATIONS, Situation(

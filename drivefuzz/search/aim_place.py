@@ -521,13 +521,16 @@ def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
 
 
 def stopped_past(mut: Mutator, sc: Scenario, rng: random.Random, at: float,
-                 past: tuple[float, float] = (4.0, 14.0)):
+                 past: tuple[float, float] = (4.0, 14.0), side: str | None = None):
     """A vehicle standing on the lane the ego turns into (or changes into), ``past`` m past the place ``at`` (4-14 m:
     just out of the turn's junction): the end of a queue, or a car waiting to turn off, that the ego sees as its
     heading comes round and meets while it still turns. It drives on 2-6 s after the ego is expected there (an ADS
     that waits behind a stopped car, as the reference ADS does, would otherwise stand there until the immobility
     oracle fires, one more execution of that finding). (The catalogue's vehicles ahead start before the junction:
-    the ego met them there, going straight; 0 of 7 aimed builds for a car ahead in a left turn on town's seeds.)"""
+    the ego met them there, going straight; 0 of 7 aimed builds for a car ahead in a left turn on town's seeds.)
+    ``side``: on the lane beside that one on that side instead (None where there is none), which the turning ego
+    passes close by: centred on lanes of 3.2 m, the bodies are 1.4 m apart (the catalogue's cars beside need the
+    ego at 4 m/s or more, which it does not drive in a turn: 0 of 26 aimed builds on the interchange's seeds)."""
     past = rng.uniform(*past)  # farther, the ego had come out of the turn when it met it (braking, cruising)
     spot = cat._route_spot(mut, sc, at + past)
     turn = cat._route_spot(mut, sc, at)
@@ -535,6 +538,12 @@ def stopped_past(mut: Mutator, sc: Scenario, rng: random.Random, at: float,
         return None
     i, _, pos = spot
     lane = mut.ego_lane_at(sc, i, pos)  # the lane the turn leads into, before any lane change the route needs
+    if side is not None:
+        beside = _lanes_beside(mut, lane, side)
+        if not beside:
+            return None
+        lane = beside[0].getID() if len(beside) == 1 else min(
+            beside, key=lambda ln: abs(ln.getIndex() - mut.rmap.lane(lane).getIndex())).getID()
     speed = round(lane_limit(mut, lane) * rng.uniform(0.4, 0.7), 2)
     roll = speed * speed / (2.0 * STAND_DECEL)  # it enters at its speed and stops at once
     release = round(mut._ego_eta(sc, at + past) + rng.uniform(2.0, 6.0), 1)
@@ -542,7 +551,8 @@ def stopped_past(mut: Mutator, sc: Scenario, rng: random.Random, at: float,
              Maneuver(time=release, action=ManeuverAction.SPEED, value=speed))
     a = cat.Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=lane,
                   start_pos=round(max(pos - roll, 1.0), 2), speed=speed, dest_edge=cat._dest(mut, sc), maneuvers=steps)
-    return [a], [], {}, (f"vehicle {a.id} standing on {lane} @ {pos:.1f} m, just past the turn, until {release} s")
+    where = "just past the turn" if side is None else f"on the ego's {side}, just past the turn"
+    return [a], [], {}, (f"vehicle {a.id} standing on {lane} @ {pos:.1f} m, {where}, until {release} s")
 
 
 def stopped_on_ring(mut: Mutator, sc: Scenario, rng: random.Random):
