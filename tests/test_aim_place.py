@@ -728,3 +728,29 @@ def test_a_car_aimed_beside_a_turn_stands_on_the_lane_beside_the_one_the_turn_le
     assert hits >= 2
     # where the turn leads into the outermost lane that cars use, there is none on that side: nothing is built
     assert aimed(mut, sc, "party-manoeuvre:vehicle/right|turn_right", random.Random(0))[0].scenario is sc
+
+
+def test_a_car_aimed_beside_the_ego_at_a_light_stands_level_with_its_stop_line():
+    # the catalogue's cars beside need the ego at 4 m/s or more where it meets them: at a light it stops
+    from pathlib import Path
+
+    from drivefuzz.scenario.seed import list_seeds
+    from drivefuzz.scenario.sumofiles import read_scenario
+    from drivefuzz.search.aim import aimed
+
+    root = Path(__file__).resolve().parent.parent / "seeds" / "interchange"
+    sc = read_scenario(list_seeds(root)[0])  # NB0 (two lanes, the ego on the right one) straight through tS
+    mut = Mutator(load_roadmap(sc.network_path()))
+    cell = "party-element:vehicle/left|signal/green"
+    stop_line = mut.rmap.lane("NB0_1").getLength()
+    built = hits = 0
+    for k in range(8):
+        m, _ = aimed(mut, sc, cell, random.Random(k))
+        if m.scenario is sc:  # the light drawn was tN, where the ego turns left from the leftmost lane
+            continue
+        built += 1
+        (a,) = m.scenario.actors[len(m.scenario.actors) - 1:]
+        assert a.start_lane == "NB0_1" and stop_line - 12.0 < a.start_pos < stop_line
+        ex = run(m.scenario)
+        hits += cell in execution_cells(m.scenario, ex.trace, mut.rmap, risk_score(ex.trace))
+    assert built >= 2 and hits >= built - 1, (built, hits)

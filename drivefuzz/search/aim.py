@@ -57,6 +57,9 @@ from drivefuzz.search.aim_place import (GRIP_ACCEL_LENGTH_M, JUNCTION_COLUMNS, d
                                         walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 
+#: [m] past the place where the ego stops (a light's stop line: before it) that a car beside it stands, its front
+#: level with the ego's or a little ahead
+LEVEL_WITH_STOP_M = (-2.5, 0.5)
 #: [m] an actor this far before a junction (along the ego's route) meets the ego at it
 NEAR_JUNCTION_M = 50.0
 #: builders that time their actor to the aimed place themselves (no filter on where it starts)
@@ -315,6 +318,10 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
         return [Situation("follower", "", follower if at is None else partial(follower_at, at=at))]
     if approach in ("left", "right") and col in ("turn_left", "turn_right") and at is not None:
         return [Situation("stopped_past", "", partial(stopped_past, at=at, side=side))]
+    if approach in ("left", "right") and (col.startswith("signal/") or col == "stop_go") and at is not None:
+        # standing on the lane beside, level with where the ego stops (a light's stop line): the cars beside
+        # need the ego at 4 m/s or more there (left|signal/red: 0 of 10 aimed draws built on the interchange)
+        return [Situation("stopped_past", "", partial(stopped_past, at=at, past=LEVEL_WITH_STOP_M, side=side))]
     if approach in ("left", "right"):  # beside or ahead in the lane on that side, coming close
         keep = partial(_on_side, mut, sc, side)
         return [_filtered(s, keep) for s in (*prog.PROGRAMS, *cat.SITUATIONS, Situation(

@@ -551,7 +551,8 @@ def stopped_past(mut: Mutator, sc: Scenario, rng: random.Random, at: float,
              Maneuver(time=release, action=ManeuverAction.SPEED, value=speed))
     a = cat.Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=lane,
                   start_pos=round(max(pos - roll, 1.0), 2), speed=speed, dest_edge=cat._dest(mut, sc), maneuvers=steps)
-    where = "just past the turn" if side is None else f"on the ego's {side}, just past the turn"
+    where = "just past the turn" if past > 0.0 else "level with where the ego stops"
+    where = where if side is None else f"on the ego's {side}, {where}"
     return [a], [], {}, (f"vehicle {a.id} standing on {lane} @ {pos:.1f} m, {where}, until {release} s")
 
 
