@@ -754,3 +754,35 @@ def test_a_car_aimed_beside_the_ego_at_a_light_stands_level_with_its_stop_line()
         ex = run(m.scenario)
         hits += cell in execution_cells(m.scenario, ex.trace, mut.rmap, risk_score(ex.trace))
     assert built >= 2 and hits >= built - 1, (built, hits)
+
+
+def test_a_car_or_a_patch_aimed_at_the_ego_s_standing_start_is_met_as_it_pulls_away():
+    # a route with no stop and no light to turn red: stop and go is the ego's start. The catalogue's cars ahead
+    # start 12-120 m ahead and the patches 25-35 m long: neither was met within the 3 s after the standstill
+    from pathlib import Path
+
+    from drivefuzz.scenario.seed import list_seeds
+    from drivefuzz.scenario.sumofiles import read_scenario
+    from drivefuzz.search.aim import aimed
+
+    root = Path(__file__).resolve().parent.parent / "seeds" / "roundabout"
+    sc = read_scenario(list_seeds(root)[7])  # starts standing on the ring edge ringNW
+    mut = Mutator(load_roadmap(sc.network_path()))
+    front = sc.mission.start_pos
+    x0, y0, h = mut.rmap.geom(sc.mission.start_lane).position(front)
+    for cell in ("party-manoeuvre:vehicle/ahead|stop_go", "party-manoeuvre:none/grip|stop_go"):
+        hits = 0
+        for k in range(3):
+            m, _ = aimed(mut, sc, cell, random.Random(k))
+            if cell.endswith("ahead|stop_go"):
+                (a,) = m.scenario.actors
+                assert a.start_lane == sc.mission.start_lane and 10.0 < a.start_pos - front < 16.0
+            else:
+                (p,) = m.scenario.puddles
+                c = (p.x - x0) * math.cos(h) + (p.y - y0) * math.sin(h)  # its middle, ahead of the ego's front
+                # under both axles as it stands (the rear one 3.7 m behind its front), left within 2.5 m driven
+                assert c - p.length / 2.0 < -4.0 and 0.0 < c + p.length / 2.0 <= 2.6, (c, p.length)
+            ex = run(m.scenario)
+            assert not ex.misbehaviors
+            hits += cell in execution_cells(m.scenario, ex.trace, mut.rmap, risk_score(ex.trace))
+        assert hits >= 2, cell

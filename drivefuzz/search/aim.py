@@ -51,15 +51,22 @@ from drivefuzz.search import catalogue as cat
 from drivefuzz.search import programs as prog
 from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
-from drivefuzz.search.aim_place import (GRIP_ACCEL_LENGTH_M, JUNCTION_COLUMNS, drawn_level, follower_at, grip_at,
-                                        into_lane, lane_change_moves, meeting, passes, profile_spots, shifted_start,
-                                        started_at_speed, stopped_on_ring, stopped_past,
+from drivefuzz.search.aim_place import (GRIP_ACCEL_LENGTH_M, GRIP_START_BEHIND_M, GRIP_START_LENGTH_M,
+                                        GRIP_START_MU, JUNCTION_COLUMNS, START_SPOTS_M, drawn_level, follower_at,
+                                        grip_at, into_lane, lane_change_moves, meeting, passes, profile_spots,
+                                        shifted_start, started_at_speed, stopped_on_ring, stopped_past,
                                         walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 
 #: [m] past the place where the ego stops (a light's stop line: before it) that a car beside it stands, its front
 #: level with the ego's or a little ahead
 LEVEL_WITH_STOP_M = (-2.5, 0.5)
+#: [m] ahead of the ego's front at its standing start that the front of a car standing ahead of it is, driving on
+#: after the ego came: its rear 7.5-11.5 m ahead, close enough to be met within the 3 s after the standstill in which
+#: the manoeuvre counts as stop and go, far enough that the ego moves off (the catalogue's cars ahead start 12-120 m
+#: ahead: `python tools/lab_aim.py --network roundabout --cells "ahead|stop_go"`, 0 of 16 draws built; a car 9-14 m
+#: ahead of the ego's front was met as it stood, one 20 m ahead as it braked)
+STANDING_AHEAD_M = (12.0, 16.0)
 #: [m] an actor this far before a junction (along the ego's route) meets the ego at it
 NEAR_JUNCTION_M = 50.0
 #: builders that time their actor to the aimed place themselves (no filter on where it starts)
@@ -273,10 +280,15 @@ def _filtered(situation: Situation, keep: Callable | None) -> Situation:
 def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float | None = None) -> list[Situation]:
     """The situations that create ``party`` (with its side filter), for the column ``col``; those in :data:`TIMED`
     meet the ego at the route distance ``at`` [m] where one is given."""
+    from drivefuzz.triage.coverage import STANDSTILL
+
     kind, approach = party.split("/", 1)
     side = "left" if approach.endswith("left") else "right" if approach.endswith("right") else None
     if kind == "none":  # a patch where the column puts the ego; the catalogue's lies before a random light or turn
         if at is not None:  # of the route (tools/lab_aim.py on town, 3 draws: 39 of 270 reached their cell, now 121)
+            if col == "stop_go" and at <= max(START_SPOTS_M) and sc.mission.start_speed < STANDSTILL:
+                return [Situation("grip", "", partial(grip_at, at=0.0, length_m=GRIP_START_LENGTH_M,
+                                                      before_m=GRIP_START_BEHIND_M, mu=GRIP_START_MU))]
             if col == "accelerate":  # a short patch at the place itself
                 return [Situation("grip", "", partial(grip_at, at=at, length_m=GRIP_ACCEL_LENGTH_M, before_m=2.0))]
             return [Situation("grip", "", partial(grip_at, at=at))]
@@ -306,6 +318,9 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
         return [Situation("stopped_past", "", stopped_on_ring)]
     if approach == "ahead" and col == "lane_change" and at is not None:  # standing on the lane it changes into
         return [Situation("stopped_past", "", partial(stopped_past, at=at, past=STANDING_PAST_CHANGE_M))]
+    if approach == "ahead" and col == "stop_go" and at is not None and at <= max(START_SPOTS_M) \
+            and sc.mission.start_speed < STANDSTILL:  # pulling away from its start: a car standing just ahead
+        return [Situation("stopped_past", "", partial(stopped_past, at=0.0, past=STANDING_AHEAD_M))]
     if approach == "ahead":
         names = {"brake": ("lead_brakes", "brake_check", "lead_stopped"),
                  "stop_go": ("lead_stopped", "pulls_out", "lead_brakes"),

@@ -57,6 +57,9 @@ STAND_DECEL = 8.0
 JUNCTION_COLUMNS = ("signal/green", "signal/amber", "signal/red", "priority", "yield", "turn_left", "turn_right")
 
 
+#: [m] route distances where the ego is still pulling away from a standing start (``stop_go`` where the route has
+#: no stop and no light to turn red)
+START_SPOTS_M = (5.0, 10.0, 15.0)
 #: [m] from the ego's start that a ring edge must begin for a car to stand on it (:func:`stopped_on_ring`)
 RING_ENTRY_CLEAR_M = 10.0
 
@@ -96,7 +99,7 @@ def meeting(mut: Mutator, sc: Scenario, col: str, rng: random.Random) -> tuple[S
             new, desc = shift_light(mut, sc, at, "signal/red", rng)
             if new is not None:
                 return new, at, desc
-        spots = [d for d in (5.0, 10.0, 15.0) if d < _goal(mut, sc)]  # its start
+        spots = [d for d in START_SPOTS_M if d < _goal(mut, sc)]  # its start
     return sc, (float(rng.choice(spots)) if spots else None), ""
 
 
@@ -233,22 +236,30 @@ GRIP_MU = (0.05, 0.15)
 #: `python tools/lab_aim.py --network interchange --cells "none/grip|accelerate" --draws 2`: 1 of 16 reached the
 #: cell on that patch, 9 on this one
 GRIP_ACCEL_LENGTH_M = (3.0, 6.0)
+#: [m] behind the ego's front at its standing start that a patch aimed at its pulling away begins (its rear axle
+#: is some 3.7 m behind), and [m] how long it is: it leaves the patch within the 3 s after the standstill in which
+#: the manoeuvre counts as stop and go (from 20 m before the place and 25-35 m long, the ego was still on it or
+#: met its grip limit later: `python tools/lab_aim.py --network roundabout --cells "grip|stop_go"`, 0 of 16)
+GRIP_START_BEHIND_M, GRIP_START_LENGTH_M, GRIP_START_MU = 5.5, (6.0, 8.0), (0.15, 0.25)
 
 
 def grip_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float,
-            length_m: tuple[float, float] = GRIP_LENGTH_M, before_m: float = GRIP_BEFORE_M):
+            length_m: tuple[float, float] = GRIP_LENGTH_M, before_m: float = GRIP_BEFORE_M,
+            mu: tuple[float, float] = GRIP_MU):
     """A low-friction patch (:data:`GRIP_MU`) across the ego's lane and the lanes beside it, from
     :data:`GRIP_BEFORE_M` before the route distance ``at`` [m]: the ego changes lanes, brakes, turns (or drives on)
-    on it there.
+    on it there; ``at`` 0 (its standing start): from ``before_m`` behind its front, where it pulls away.
     (From 5 m before, mu 0.05-0.3: the ego had changed lanes when it came to it, and used a third of its grip.)"""
     spot = cat._route_spot(mut, sc, max(at - before_m, 0.0))
     if spot is None:
         return None
     _, lane, pos = spot
+    if at <= 0.0:  # aimed at the ego's start: from behind it, under its wheels as it pulls away
+        pos -= before_m
     length = rng.uniform(*length_m)
-    x, y, h = mut.rmap.geom(lane).position(pos + length / 2.0)
+    x, y, h = mut.rmap.geom(lane).position(max(pos + length / 2.0, 0.0))
     p = Puddle(x=round(x, 2), y=round(y, 2), length=round(length, 2), width=round(rng.uniform(6.0, 8.0), 2),
-               rotation=round(h, 3), friction=round(rng.uniform(*GRIP_MU), 2))
+               rotation=round(h, 3), friction=round(rng.uniform(*mu), 2))
     return [], [p], {}, f"puddle mu={p.friction} on {lane} from {pos:.0f} m, where the ego is expected at {at:.0f} m"
 
 
@@ -530,7 +541,8 @@ def stopped_past(mut: Mutator, sc: Scenario, rng: random.Random, at: float,
     the ego met them there, going straight; 0 of 7 aimed builds for a car ahead in a left turn on town's seeds.)
     ``side``: on the lane beside that one on that side instead (None where there is none), which the turning ego
     passes close by: centred on lanes of 3.2 m, the bodies are 1.4 m apart (the catalogue's cars beside need the
-    ego at 4 m/s or more, which it does not drive in a turn: 0 of 26 aimed builds on the interchange's seeds)."""
+    ego at 4 m/s or more, which it does not drive in a turn: 0 of 26 aimed builds on the interchange's seeds).
+    ``at`` 0: ahead of the ego as it stands at its start, met as it pulls away."""
     past = rng.uniform(*past)  # farther, the ego had come out of the turn when it met it (braking, cruising)
     spot = cat._route_spot(mut, sc, at + past)
     turn = cat._route_spot(mut, sc, at)
@@ -551,7 +563,8 @@ def stopped_past(mut: Mutator, sc: Scenario, rng: random.Random, at: float,
              Maneuver(time=release, action=ManeuverAction.SPEED, value=speed))
     a = cat.Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=NavType.MANEUVER, start_lane=lane,
                   start_pos=round(max(pos - roll, 1.0), 2), speed=speed, dest_edge=cat._dest(mut, sc), maneuvers=steps)
-    where = "just past the turn" if past > 0.0 else "level with where the ego stops"
+    where = ("level with where the ego stops" if past <= 0.0 else "ahead of where the ego starts" if at <= 0.0
+             else "just past the turn")
     where = where if side is None else f"on the ego's {side}, {where}"
     return [a], [], {}, (f"vehicle {a.id} standing on {lane} @ {pos:.1f} m, {where}, until {release} s")
 
