@@ -284,9 +284,12 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
 
     kind, approach = party.split("/", 1)
     side = "left" if approach.endswith("left") else "right" if approach.endswith("right") else None
+    # stop and go where the route has no stop and no light to turn red: the ego pulling away from its standing start
+    pulls_away = col == "stop_go" and at is not None and at <= max(START_SPOTS_M) \
+        and sc.mission.start_speed < STANDSTILL
     if kind == "none":  # a patch where the column puts the ego; the catalogue's lies before a random light or turn
         if at is not None:  # of the route (tools/lab_aim.py on town, 3 draws: 39 of 270 reached their cell, now 121)
-            if col == "stop_go" and at <= max(START_SPOTS_M) and sc.mission.start_speed < STANDSTILL:
+            if pulls_away:  # under its wheels as it stands
                 return [Situation("grip", "", partial(grip_at, at=0.0, length_m=GRIP_START_LENGTH_M,
                                                       before_m=GRIP_START_BEHIND_M, mu=GRIP_START_MU))]
             if col == "accelerate":  # a short patch at the place itself
@@ -318,8 +321,7 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
         return [Situation("stopped_past", "", stopped_on_ring)]
     if approach == "ahead" and col == "lane_change" and at is not None:  # standing on the lane it changes into
         return [Situation("stopped_past", "", partial(stopped_past, at=at, past=STANDING_PAST_CHANGE_M))]
-    if approach == "ahead" and col == "stop_go" and at is not None and at <= max(START_SPOTS_M) \
-            and sc.mission.start_speed < STANDSTILL:  # pulling away from its start: a car standing just ahead
+    if approach == "ahead" and pulls_away:  # a car standing just ahead of it
         return [Situation("stopped_past", "", partial(stopped_past, at=0.0, past=STANDING_AHEAD_M))]
     if approach == "ahead":
         names = {"brake": ("lead_brakes", "brake_check", "lead_stopped"),
