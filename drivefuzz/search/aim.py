@@ -51,7 +51,7 @@ from drivefuzz.search import catalogue as cat
 from drivefuzz.search import programs as prog
 from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
-from drivefuzz.search.aim_place import (GRIP_ACCEL_LENGTH_M, GRIP_START_BEHIND_M, GRIP_START_LENGTH_M,
+from drivefuzz.search.aim_place import (FOLLOW_TURN_CLOSE_S, GRIP_ACCEL_LENGTH_M, GRIP_START_BEHIND_M, GRIP_START_LENGTH_M,
                                         GRIP_START_MU, JUNCTION_COLUMNS, START_SPOTS_M, drawn_level, follower_at,
                                         grip_at, into_lane, lane_change_moves, meeting, passes, profile_spots,
                                         shifted_start, started_at_speed, stopped_on_ring, stopped_past,
@@ -332,7 +332,9 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
                            "hidden_stopped"))]
         return pool
     if approach == "behind":
-        return [Situation("follower", "", follower if at is None else partial(follower_at, at=at))]
+        turn = FOLLOW_TURN_CLOSE_S if col in ("turn_left", "turn_right") else None
+        return [Situation("follower", "", follower if at is None else partial(follower_at, at=at,
+                                                                                close_after_s=turn))]
     if approach in ("left", "right") and col in ("turn_left", "turn_right") and at is not None:
         return [Situation("stopped_past", "", partial(stopped_past, at=at, side=side))]
     if approach in ("left", "right") and (col.startswith("signal/") or col == "stop_go") and at is not None:

@@ -487,12 +487,25 @@ def drawn_level(mut: Mutator, sc: Scenario, rng: random.Random, at: float | None
                          f"({t_level:.1f} s) and drifts {step.depth} m towards the ego")
 
 
-def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
+#: [s] after the ego is expected at a turn's place (2-8 m into the junction) that a follower aimed at the turn, close
+#: behind it since before the junction, closes in on it
+FOLLOW_TURN_CLOSE_S = (0.0, 1.5)
+#: [m] before a turn's place where such a follower comes up behind the ego
+FOLLOW_TURN_BEFORE_M = 30.0
+
+
+def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float,
+                close_after_s: tuple[float, float] | None = None):
     """A vehicle on the ego's lane behind the place ``at`` that reaches the ego's rear as the ego gets there: where
     the ego is expected to stand there (a red light, say), a lawful car arriving 0.5-4 s after it, half of them
     following close (a follow step); where it is expected to move, a car 3-6 m/s faster (at most 1.2 x the limit)
     that follows close and closes in without braking until its time to collision is 1.5-2.5 s (a close step).
-    Either closes in from behind."""
+    Either closes in from behind. ``close_after_s`` (a turn: :data:`FOLLOW_TURN_CLOSE_S`): it comes up behind the
+    ego before the place and follows it close into the turn, and closes in that many seconds (a range) after the ego
+    is expected at the place."""
+    t_close = mut._ego_eta(sc, max(at - 0.5, 0.0)) + rng.uniform(*close_after_s) if close_after_s else None
+    if t_close is not None:  # it comes up behind the ego where it still drives straight, before the turn
+        at = max(at - FOLLOW_TURN_BEFORE_M, 0.0)
     spot = cat._route_spot(mut, sc, max(at - 0.5, 0.0))
     if spot is None:
         return None
@@ -519,12 +532,13 @@ def follower_at(mut: Mutator, sc: Scenario, rng: random.Random, at: float):
     # the cruising ego on the highway's seeds met it, all of them at its stop at the goal instead)
     steps: tuple[Maneuver, ...] = ()
     how = ""
-    if v_ego >= 1.0 or rng.random() < TAILGATE_SHARE:
+    if v_ego >= 1.0 or t_close is not None or rng.random() < TAILGATE_SHARE:
         steps = (Maneuver(time=0.0, action=ManeuverAction.FOLLOW, value=round(rng.uniform(*TAILGATE_S), 2)),)
         how = f", following at a time gap of {steps[0].value:.2f} s"
-    if v_ego >= 1.0:
-        steps += (Maneuver(time=0.0, action=ManeuverAction.CLOSE, value=0.0, at=round(rng.uniform(*CLOSE_TTC), 2)),)
-        how += f" and braking at a time to collision of {steps[1].at:.2f} s"
+    if v_ego >= 1.0 or t_close is not None:
+        when = 0.0 if t_close is None else round(max(t_close - depart, 0.0), 1)
+        steps += (Maneuver(time=when, action=ManeuverAction.CLOSE, value=0.0, at=round(rng.uniform(*CLOSE_TTC), 2)),)
+        how += f" and, from {depart + when:.1f} s, braking at a time to collision of {steps[1].at:.2f} s"
     a = cat.Actor(id=mut._new_id(sc, "v"), kind=ActorKind.VEHICLE, nav=nav, start_lane=start_lane, start_pos=start,
                   speed=speed, depart=depart, dest_edge=cat._dest(mut, sc), maneuvers=steps)
     return [a], [], {}, (f"{a.id} comes up behind the ego on {lane} at {speed:.1f} m/s, reaching it at "

@@ -173,11 +173,14 @@ def party(trace, actor: str | None, f: int) -> str:
     dh = abs(wrap_angle(float(track.heading[k]) - float(trace["heading"][k])))
     with np.errstate(invalid="ignore"):  # NaN where it was not there: not moving
         moving = bool(np.any(np.asarray(track.speed[k:f + 1], dtype=float) > 0.5))
-    if moving and dh >= 3 * math.pi / 4:
-        return "vehicle/oncoming"
-    if moving and dh > math.pi / 4:
-        return f"vehicle/crossing_{side}"
-    lx, ly = along_path(trace, k, float(track.x[k]), float(track.y[k]))
+    lx, ly, way = along_path(trace, k, float(track.x[k]), float(track.y[k]), heading=True)
+    # on the ego's path and going its way there (a car behind it, or ahead of it, as it turns): neither oncoming nor
+    # crossing, however the ego itself heads now (by that alone a car following it through a turn crossed it)
+    if moving and not (abs(ly) < SAME_LANE_M and abs(wrap_angle(float(track.heading[k]) - way)) <= math.pi / 4):
+        if dh >= 3 * math.pi / 4:
+            return "vehicle/oncoming"
+        if dh > math.pi / 4:
+            return f"vehicle/crossing_{side}"
     side = "left" if ly > 0 else "right"
     if abs(ly) < SAME_LANE_M:
         return "vehicle/ahead" if lx > 0 else "vehicle/behind"

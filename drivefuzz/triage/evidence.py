@@ -83,18 +83,19 @@ PATH_S = 10.0
 PATH_RUN_M = 50.0
 
 
-def along_path(trace, k: int, x: float, y: float) -> tuple[float, float]:
+def along_path(trace, k: int, x: float, y: float, heading: bool = False) -> tuple[float, ...]:
     """(forward, left) [m] of (x, y) from the ego at frame ``k``, along the path it drives from
     :data:`PATH_S` s before ``k`` to as long after (straight on beyond either end) and off it. In the body frame,
     a car ahead in the ego's lane on a bend, or on the lane its turn leads into, is beside it (a roundabout's ring
-    turns left: the car ahead on it read as ``vehicle/left``); on the path it is ahead."""
+    turns left: the car ahead on it read as ``vehicle/left``); on the path it is ahead. With ``heading``, also the
+    path's heading [rad] at the point nearest (x, y): the ego's way there."""
     span = int(round(PATH_S / trace.step_length))
     lo, hi = max(k - span, 0), min(k + span, trace.n_frames - 1)
     px = np.asarray(trace["x"][lo:hi + 1], dtype=float)
     py = np.asarray(trace["y"][lo:hi + 1], dtype=float)
     ok = np.isfinite(px) & np.isfinite(py)
     if ok.sum() < 2:
-        return to_local(trace, k, x, y)
+        return (*to_local(trace, k, x, y), float(trace["heading"][k])) if heading else to_local(trace, k, x, y)
     idx = np.flatnonzero(ok)
     px, py = px[idx], py[idx]
     keep = np.concatenate(([True], np.hypot(np.diff(px), np.diff(py)) > 0.05))  # standing still: one point
@@ -119,7 +120,8 @@ def along_path(trace, k: int, x: float, y: float) -> tuple[float, float]:
     else:
         s_ego = s[ego]
     cross = dx[i] * (y - ay[i]) - dy[i] * (x - ax[i])
-    return float(s[i] + u[i] * seg[i] - s_ego), float(math.copysign(d[i], cross) if d[i] > 0 else 0.0)
+    out = float(s[i] + u[i] * seg[i] - s_ego), float(math.copysign(d[i], cross) if d[i] > 0 else 0.0)
+    return (*out, math.atan2(dy[i], dx[i])) if heading else out
 
 
 def contact_point(trace, f: int, other: Track) -> tuple[float, float] | None:
