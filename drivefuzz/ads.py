@@ -25,7 +25,7 @@ from typing import Any, ClassVar, Mapping, NamedTuple
 
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from drivefuzz.errors import InvalidConfig, PluginError
+from drivefuzz.errors import ADS_PLUGIN, InvalidConfig, PluginError
 
 ADS_GROUP = "drivefuzz.ads"
 
@@ -221,7 +221,7 @@ def load_ads(name: str, options: Mapping[str, Any] | None = None, source: str = 
             cls = eps[name].load()
         except Exception as exc:  # a broken plugin must not take the tool down with a traceback
             raise PluginError(f"ADS plugin {name!r} ({eps[name].value}) failed to load: "
-                              f"{type(exc).__name__}: {exc}") from exc
+                              f"{type(exc).__name__}: {exc}", ADS_PLUGIN) from exc
     else:
         cls = _import_class(name, source)
     problem = None
@@ -230,7 +230,7 @@ def load_ads(name: str, options: Mapping[str, Any] | None = None, source: str = 
     elif inspect.isabstract(cls):
         problem = f"is an abstract class (implements none of {', '.join(sorted(cls.__abstractmethods__))})"
     if problem and name in eps:  # an installed plugin that is broken: not the user's mistake
-        raise PluginError(f"ADS plugin {name!r} ({eps[name].value}) {problem}")
+        raise PluginError(f"ADS plugin {name!r} ({eps[name].value}) {problem}", ADS_PLUGIN)
     if problem:
         raise InvalidConfig(source, name, problem, "a subclass of drivefuzz.ads.ADS that implements reset and step")
     try:
@@ -238,7 +238,7 @@ def load_ads(name: str, options: Mapping[str, Any] | None = None, source: str = 
     except InvalidConfig:
         raise
     except Exception as exc:
-        raise PluginError(f"ADS plugin {name!r} failed to start: {type(exc).__name__}: {exc}") from exc
+        raise PluginError(f"ADS plugin {name!r} failed to start: {type(exc).__name__}: {exc}", ADS_PLUGIN) from exc
 
 
 def _import_class(name: str, source: str) -> Any:
@@ -254,9 +254,9 @@ def _import_class(name: str, source: str) -> Any:
     except ModuleNotFoundError as exc:
         if exc.name is not None and module.split(".")[0] == exc.name.split(".")[0]:
             raise InvalidConfig(source, name, f"no module named {exc.name!r}", valid) from None
-        raise PluginError(f"ADS plugin {name!r} failed to load: {type(exc).__name__}: {exc}") from exc
+        raise PluginError(f"ADS plugin {name!r} failed to load: {type(exc).__name__}: {exc}", ADS_PLUGIN) from exc
     except Exception as exc:  # a broken plugin must not take the tool down with a traceback
-        raise PluginError(f"ADS plugin {name!r} failed to load: {type(exc).__name__}: {exc}") from exc
+        raise PluginError(f"ADS plugin {name!r} failed to load: {type(exc).__name__}: {exc}", ADS_PLUGIN) from exc
     if not hasattr(mod, attr):
         raise InvalidConfig(source, name, f"module {module!r} has no attribute {attr!r}", valid)
     return getattr(mod, attr)

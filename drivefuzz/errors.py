@@ -41,8 +41,22 @@ class InvalidConfig(InvalidInput):
     """A configuration file or CLI option is wrong."""
 
 
+#: :attr:`PluginError.plugin`: which kind of plugin failed (who is to blame for a failed execution)
+ADS_PLUGIN, ORACLE_PLUGIN = "ads", "oracle"
+
+
 class PluginError(DriveFuzzError, RuntimeError):
-    """An ADS or oracle plugin could not be loaded or raised during a run."""
+    """An ADS or oracle plugin could not be loaded or raised during a run.
+
+    ``plugin`` says which: :data:`ADS_PLUGIN` (a bug of the ADS under test: a finding), :data:`ORACLE_PLUGIN`
+    (a bug of the tool's configuration, not of the ADS), or "" when the raiser did not say."""
+
+    def __init__(self, message: str = "", plugin: str = ""):
+        super().__init__(message)
+        self.plugin = plugin
+
+    def __reduce__(self):  # pickled with its plugin (args holds only the message)
+        return (type(self), (str(self), self.plugin))
 
 
 class SimulationError(DriveFuzzError, RuntimeError):

@@ -23,7 +23,7 @@ from typing import Any, ClassVar, Mapping, Sequence
 import numpy as np
 from pydantic import BaseModel, ConfigDict, ValidationError
 
-from drivefuzz.errors import InvalidConfig, PluginError
+from drivefuzz.errors import ORACLE_PLUGIN, InvalidConfig, PluginError
 
 ORACLE_GROUP = "drivefuzz.oracles"
 
@@ -182,9 +182,10 @@ def available_oracles() -> dict[str, type[Oracle]]:
         try:
             cls = ep.load()
         except Exception as exc:
-            raise PluginError(f"oracle plugin {ep.name!r} ({ep.value}) failed to load: {type(exc).__name__}: {exc}") from exc
+            raise PluginError(f"oracle plugin {ep.name!r} ({ep.value}) failed to load: {type(exc).__name__}: {exc}",
+                              ORACLE_PLUGIN) from exc
         if not (isinstance(cls, type) and issubclass(cls, Oracle)):
-            raise PluginError(f"oracle plugin {ep.name!r} is not a drivefuzz.oracle.Oracle subclass")
+            raise PluginError(f"oracle plugin {ep.name!r} is not a drivefuzz.oracle.Oracle subclass", ORACLE_PLUGIN)
         out[ep.name] = cls
     return out
 
@@ -205,7 +206,11 @@ class OracleSettings(BaseModel):
         for name, cls in classes.items():
             cfg = make_config(cls, self.settings.get(name, {}), source)
             if cfg.enabled:
-                out.append(cls(cfg))
+                try:
+                    out.append(cls(cfg))
+                except Exception as exc:  # a plugin's bug, not the ADS's: the oracle is named and blamed
+                    raise PluginError(f"oracle plugin {name!r} failed to start: {type(exc).__name__}: {exc}",
+                                      ORACLE_PLUGIN) from exc
         return out
 
 

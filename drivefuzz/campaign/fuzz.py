@@ -22,6 +22,8 @@ Output directory (a person opens it without drivefuzz)::
     findings/<signature>-<oracle>/   one per signature the ego is to blame for: SUMO files, scenario.json, trace/,
                             verdict.json (attribution, signature, reproduction rate), hits.json, replay.sh
     incidents/<signature>-<oracle>/  the same for events that were not the ego's fault
+    errors/<signature>-<status>/     failed executions that are not the ADS's fault (SUMO died, drivefuzz or an
+                            oracle plugin raised): errors of the tool, with the error and its traceback, never findings
 """
 
 from __future__ import annotations
@@ -54,7 +56,7 @@ CREATE TABLE IF NOT EXISTS executions (
     seed_index INTEGER, lineage INTEGER, cycle INTEGER, member INTEGER,
     scenario_hash TEXT, parent_hash TEXT, mutation TEXT, retries INTEGER,
     score REAL, risk REAL, components TEXT, verdict TEXT, termination TEXT, finding TEXT,
-    incident TEXT, signature TEXT, fault TEXT,
+    incident TEXT, error TEXT, signature TEXT, fault TEXT,
     frames INTEGER, wall_time REAL, timings TEXT, pid INTEGER
 );
 """
@@ -62,7 +64,7 @@ CREATE TABLE IF NOT EXISTS executions (
 COLUMNS = (("key", "key"), ("seed_index", "seed_index"), ("lineage", "lineage"), ("cycle", "cycle"),
            ("member", "member"), ("scenario_hash", "hash"), ("parent_hash", "parent"), ("mutation", "mutation"),
            ("retries", "retries"), ("score", "score"), ("risk", "risk"), ("components", "components"), ("verdict", "verdict"), ("termination", "termination"),
-           ("finding", "finding"), ("incident", "incident"), ("signature", "signature"), ("fault", "fault"), ("frames", "frames"), ("wall_time", "wall_time"), ("timings", "timings"),
+           ("finding", "finding"), ("incident", "incident"), ("error", "error"), ("signature", "signature"), ("fault", "fault"), ("frames", "frames"), ("wall_time", "wall_time"), ("timings", "timings"),
            ("pid", "pid"))
 _INSERT = (f"INSERT OR IGNORE INTO executions ({', '.join(c for c, _ in COLUMNS)}) "
            f"VALUES ({', '.join('?' * len(COLUMNS))})")
@@ -95,6 +97,7 @@ class Progress:
     new_execs: int = 0  # executions of this run (the rate's numerator)
     findings: int = 0  # distinct signatures the ego is to blame for
     incidents: int = 0  # distinct signatures it is not
+    errors: int = 0  # distinct failures of the tool (SUMO, drivefuzz, an oracle plugin): not findings
     seed_index: int = 0
     cycle: int = 0
     lineage: int = 0
@@ -148,6 +151,7 @@ class Campaign:
         self.progress = Progress(jobs_total=len(self.seeds))
         self.findings: list[Finding] = []
         self.incidents: list[Finding] = []  # not the ego's fault: kept apart, not counted as findings
+        self.errors: list[Finding] = []  # executions the tool failed (fault tool or oracle-plugin): not findings
         self.failed_jobs: dict[int, str] = {}  # seed index -> why its job failed (Dask gave up on it)
         self.stop_requested = False
         self.stop_reason = ""  # why the run ended, for the summary
@@ -164,8 +168,8 @@ class Campaign:
         self.out.mkdir(parents=True, exist_ok=True)
         for sub in ("corpus", "findings", "incidents", "jobs"):
             (self.out / sub).mkdir(exist_ok=True)
-        for sub in ("findings", "incidents"):  # folders half-written when a job was killed (no job runs yet)
-            for leftover in (self.out / sub).glob(".*"):
+        for sub in ("findings", "incidents", "errors"):  # folders half-written when a job was killed (no job runs yet)
+            for leftover in (self.out / sub).glob(".*") if (self.out / sub).is_dir() else ():
                 shutil.rmtree(leftover, ignore_errors=True)
         if not resume or not (self.out / "manifest.json").exists():
             for i, sc in enumerate(self.seeds):
@@ -185,7 +189,7 @@ class Campaign:
         (self.out / STOP_FILE).unlink(missing_ok=True)
         self.db = open_index(self.out / "index.sqlite")  # derived data: rebuilt from the journals
         self._offsets = {}
-        self.findings, self.incidents, self.progress.execs, self.progress.findings = [], [], 0, 0
+        self.findings, self.incidents, self.errors, self.progress.execs, self.progress.findings = [], [], [], 0, 0
         self._clock_armed = False
         self.poll(quiet=True)
         self._attempts, self._clock_armed = {}, True
@@ -255,7 +259,7 @@ class Campaign:
         p.seed_index, p.cycle, p.lineage = rec["seed_index"], rec["cycle"], rec.get("lineage", 0)
         if rec.get("risk") is not None and (p.best_risk is None or rec["risk"] > p.best_risk):
             p.best_risk = rec["risk"]
-        for col, kept in (("finding", self.findings), ("incident", self.incidents)):
+        for col, kept in (("finding", self.findings), ("incident", self.incidents), ("error", self.errors)):
             if rec.get(col):
                 path = self.out / rec[col]
                 known = next((f for f in kept if f.path == path), None)
@@ -265,12 +269,12 @@ class Campaign:
                     kept.append(load_finding(path))
                     if col == "finding":
                         p.last_finding, p.last_finding_at = kept[-1].label, p.last_exec_at
-        p.findings, p.incidents = len(self.findings), len(self.incidents)
+        p.findings, p.incidents, p.errors = len(self.findings), len(self.incidents), len(self.errors)
 
     def _checked_finding(self, rec: dict[str, Any]) -> dict[str, Any]:
         """``rec``, less a finding or incident whose verdict is unreadable (its folder stays where it is:
         nothing is deleted, it is only left out of the index's list)."""
-        for col in ("finding", "incident"):
+        for col in ("finding", "incident", "error"):
             folder = rec.get(col)
             if not folder:
                 continue
@@ -324,8 +328,9 @@ class Campaign:
             return self.findings
         self.poll()
         hits: dict[str, list[str]] = {}
-        for rel, key in self.db.execute("SELECT COALESCE(finding, incident), key FROM executions WHERE "
-                                        "finding IS NOT NULL OR incident IS NOT NULL ORDER BY exec_id"):
+        for rel, key in self.db.execute("SELECT COALESCE(finding, incident, error), key FROM executions WHERE "
+                                        "finding IS NOT NULL OR incident IS NOT NULL OR error IS NOT NULL "
+                                        "ORDER BY exec_id"):
             hits.setdefault(rel, []).append(key)
         write_hits(self.out, hits)
         if not self.stop_reason:
@@ -342,6 +347,7 @@ class Campaign:
         first = {rel: i for i, rel in enumerate(hits)}
         self.findings.sort(key=lambda f: first.get(str(f.path.relative_to(self.out)), len(first)))
         self.incidents.sort(key=lambda f: first.get(str(f.path.relative_to(self.out)), len(first)))
+        self.errors.sort(key=lambda f: first.get(str(f.path.relative_to(self.out)), len(first)))
         return self.findings
 
     def _run_here(self, pending: list[int]) -> None:
@@ -501,7 +507,7 @@ def journal_problem(rec: Any) -> str | None:
     for key, typ in _END_KEYS.items():
         if not isinstance(rec.get(key), typ) or isinstance(rec.get(key), bool):
             return f"an end record whose {key!r} is missing or not a {typ.__name__}"
-    for col in ("finding", "incident"):
+    for col in ("finding", "incident", "error"):
         folder = rec.get(col)
         if folder is not None and (not isinstance(folder, str) or Path(folder).is_absolute()
                                    or ".." in Path(folder).parts):

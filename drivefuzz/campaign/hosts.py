@@ -140,5 +140,5 @@ class Runner:
             ex = execute(scenario, oracles=self.cfg.oracles.instantiate())
         except PluginError as exc:  # without isolation only a plugin's exception can be survived
             return Outcome(PLUGIN_ERROR, detail=str(exc), error_type=type(exc.__cause__ or exc).__name__,
-                           wall_time=time.monotonic() - t0)
+                           wall_time=time.monotonic() - t0, plugin=exc.plugin)
         return Outcome(OK, execution=ex, wall_time=time.monotonic() - t0)

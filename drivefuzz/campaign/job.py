@@ -48,7 +48,8 @@ is a new run). Each execution first claims a ticket, a file ``budget/run<R>/<n>`
 created with O_EXCL, so parallel jobs never run more than the budget between them.
 Triage reruns (counterfactual, reproduction) are not search executions and take no ticket.
 
-Findings go to ``findings/<signature>-<oracle>/``, incidents to ``incidents/...`` and successors to
+Findings go to ``findings/<signature>-<oracle>/``, incidents to ``incidents/...``, failed executions that are
+not the ADS's fault (SUMO died, drivefuzz or an oracle plugin raised) to ``errors/...``, and successors to
 ``corpus/<hash>/``. A file ``STOP`` in the campaign directory makes every job return after its
 current execution (the budget ran out, or the user pressed Ctrl-C).
 """
@@ -462,16 +463,18 @@ class SeedJob:
                 rec.update(verdict=f"{m.oracle}/{m.kind}", signature=filed.signature, fault=filed.fault,
                            triage_execs=filed.executions, scenario=self._corpus_ref(scenario),
                            **{"incident" if filed.fault == "other" else "finding": filed.rel})
-        else:  # the simulator crashed or hung, or a plugin raised: a finding of its own kind
+        else:  # the simulator crashed or hung, or a plugin raised: a record of its own kind, a finding only when
+            # the ADS raised or hung; SUMO's, drivefuzz's and an oracle plugin's failures are errors of the tool
             m = Misbehavior(oracle=out.status, kind=out.error_type or out.status, frame=-1, time=0.0,
                             position=(0.0, 0.0), details={"detail": out.detail})
             t0 = time.perf_counter()
             filed = store.triage(scenario, [m], None, key, out.status,
-                                 {"error": {"status": out.status, "type": out.error_type,
-                                            "detail": out.detail, "traceback": out.traceback}})
+                                 {"error": {"status": out.status, "type": out.error_type, "plugin": out.plugin,
+                                            "detail": out.detail, "traceback": out.traceback}}, fault=out.fault)
             timings["triage"] = time.perf_counter() - t0
             rec.update(termination=out.status, frames=0, wall_time=round(out.wall_time, 4),
-                       verdict=f"{m.oracle}/{m.kind}", finding=filed.rel, signature=filed.signature, fault="ego")
+                       verdict=f"{m.oracle}/{m.kind}", signature=filed.signature, fault=filed.fault,
+                       **{"finding" if filed.fault == "ego" else "error": filed.rel})
         timings["storage"] = time.perf_counter() - t_store - timings.get("triage", 0.0)  # triage has its own key
         rec["timings"] = {k: round(v, 6) for k, v in timings.items()}
         # the work this record stands for: the execution and every triage rerun (careful driver, reproduction,

@@ -118,7 +118,8 @@ def fuzz(network, out, resume_dir, strategy, cycles, population, budget, max_exe
         from drivefuzz.triage.report import write_report
 
         click.echo("report: {} and {}".format(*write_report(out_dir)))
-    sys.exit(_exit_code(findings + (campaign.incidents if report_all else []), bool(campaign.failed_jobs)))
+    sys.exit(_exit_code(findings + (campaign.incidents if report_all else []),
+                        bool(campaign.failed_jobs or campaign.errors)))
 
 
 def _fuzz_config(config: dict[str, Any], config_file: str | None, cli: dict[str, Any], ads_name, ads_option,
@@ -160,12 +161,15 @@ def _fuzz_config(config: dict[str, Any], config_file: str | None, cli: dict[str,
     )
 
 
-def _exit_code(findings, failed_jobs: bool) -> int:
+def _exit_code(findings, tool_failed: bool) -> int:
+    """1 for a finding of the ADS; else 3 when the tool failed (an execution's error of the tool or an oracle
+    plugin, a job that failed), else 0. An ``internal-error`` finding is one filed by a drivefuzz older than
+    the errors/ folder (a resumed campaign): it stays an error of the tool."""
     from drivefuzz.sim.simhost import INTERNAL_ERROR
 
     if any(f.misbehavior.oracle != INTERNAL_ERROR for f in findings):
         return EXIT_FOUND
-    return EXIT_INTERNAL if findings or failed_jobs else EXIT_CLEAN
+    return EXIT_INTERNAL if findings or tool_failed else EXIT_CLEAN
 
 
 def _run_campaign(campaign, resume: bool, where: str | None, jobs: int):
@@ -198,6 +202,7 @@ def _print_summary(campaign, findings, out_dir, report_all: bool = False) -> Non
     if incidents:
         _print_findings("incidents (not the ego's fault" + (", reported as findings by --report-all)" if report_all
                         else "; kept apart, --report-all counts them)"), incidents)
+    _print_errors(campaign.errors)
     for si, why in sorted(campaign.failed_jobs.items()):
         click.echo(f"job for seed {si} failed: {why}; its executions so far are saved, --resume retries it", err=True)
     if campaign.stop_reason:
@@ -235,6 +240,22 @@ def _print_findings(title: str, findings) -> None:
         rate = f"{rep['reproduced']}/{rep['runs']} {'robust' if rep.get('robust') else 'knife-edge'}" if rep else "-"
         click.echo(f"{i:>3} {f.hits:>5}  {rate:<16} {when}  {f.label}")
         click.echo(f"{'':>38}{replay_command(f.path, f.ads)}")
+
+
+def _print_errors(errors) -> None:
+    """The executions the tool failed (SUMO died, drivefuzz or an oracle plugin raised), on stderr: not findings
+    of the ADS, but each kept in a folder with its error and traceback, and replayable."""
+    from drivefuzz.campaign.fuzz import replay_command
+
+    if not errors:
+        return
+    click.echo(f"errors of the tool, not findings of the ADS ({len(errors)}; error and traceback in each "
+               "folder's verdict.json):", err=True)
+    for i, f in enumerate(errors):
+        m = f.misbehavior
+        click.echo(f"{i:>3} {f.hits:>5}  {f.signature.get('fault', 'tool'):<14} {m.oracle}/{m.kind}: "
+                   f"{str(m.details.get('detail', ''))[:160]}", err=True)
+        click.echo(f"{'':>10}{replay_command(f.path, f.ads)}", err=True)
 
 
 def _print_groups(findings) -> None:

@@ -32,7 +32,7 @@ detection is only a cross-check (it misses lateral and off-lane contact).
 Linear and immobile pedestrians are placed by the executor (``person.moveToXY``)
 every step; their recorded speed is the walked one. An exception in plugin code
 (ADS or oracle) leaves :func:`execute` as a :class:`~drivefuzz.errors.PluginError`
-naming the plugin. ``Execution.timings``: seconds per stage, ``setup``, ``sumo``
+naming the plugin and saying which kind it is (``plugin``). ``Execution.timings``: seconds per stage, ``setup``, ``sumo``
 (steps 9-10, and SUMO's own start and close), ``world`` (1), ``record`` (2), ``oracles`` (3), ``observe`` (5),
 ``ads`` (6), ``physics`` (7-8); ``tools/bench_exec.py`` prints them.
 """
@@ -56,7 +56,7 @@ import numpy as np
 
 import drivefuzz
 from drivefuzz.ads import ADS, EgoState, MissionInfo, Observation, TrafficLightState, load_ads
-from drivefuzz.errors import PluginError, SimulationError
+from drivefuzz.errors import ADS_PLUGIN, ORACLE_PLUGIN, PluginError, SimulationError
 from drivefuzz.oracle import Frame, LaneLink, Misbehavior, Oracle, RunContext, Termination
 from drivefuzz.sim.physics import VehicleParams, VehiclePhysics, place_state
 from drivefuzz.sim.gui import GuiView
@@ -217,8 +217,10 @@ def execute(
 
 
 def _plugin_error(what: str, name: str, exc: BaseException, where: str) -> PluginError:
-    """A plugin's own exception as a PluginError that names the plugin (raise it ``from exc``)."""
-    return PluginError(f"{what} {name!r} raised {type(exc).__name__} {where}: {exc}")
+    """A plugin's own exception as a PluginError that names the plugin (raise it ``from exc``); ``what`` is
+    "ADS" or "oracle", and the error's ``plugin`` says which (an ADS's exception is a finding, an oracle's not)."""
+    return PluginError(f"{what} {name!r} raised {type(exc).__name__} {where}: {exc}",
+                       ADS_PLUGIN if what == "ADS" else ORACLE_PLUGIN)
 
 
 @contextlib.contextmanager
@@ -226,7 +228,7 @@ def _blame(what: str, name: str, where: str):
     """:func:`_plugin_error` around a block (the per-frame calls use try/except: it is cheaper)."""
     try:
         yield
-    except Exception as exc:
+    except (Exception, SystemExit) as exc:  # sys.exit() too: the plugin is named
         raise _plugin_error(what, name, exc, where) from exc
 
 
@@ -492,7 +494,7 @@ class _Run:
         frame.next_tls = self.next_tls
         try:
             frame.ads_done = self.ads.done()
-        except Exception as exc:
+        except (Exception, SystemExit) as exc:  # sys.exit() too: the plugin is named
             raise _plugin_error("ADS", self.ads_name, exc, f"at frame {fidx}") from exc
         frame.actor_ids, frame.actor_kinds = actors.ids, actors.kinds
         frame.actor_x, frame.actor_y, frame.actor_heading, frame.actor_speed = self.actor_state
@@ -502,7 +504,7 @@ class _Run:
         for oracle, name in zip(self.oracles, self.oracle_names):
             try:
                 out = oracle.on_frame(frame)
-            except Exception as exc:
+            except (Exception, SystemExit) as exc:  # sys.exit() too: the plugin is named
                 raise _plugin_error("oracle", name, exc, f"at frame {fidx}") from exc
             if out:
                 fired.extend(out)
@@ -545,7 +547,7 @@ class _Run:
         try:
             control = self.ads.step(obs)
             self.steer, self.throttle, self.brake = float(control.steer), float(control.throttle), float(control.brake)
-        except Exception as exc:
+        except (Exception, SystemExit) as exc:  # sys.exit() too: the plugin is named
             raise _plugin_error("ADS", self.ads_name, exc, f"at frame {self.fidx}") from exc
         self.timings["ads"] += perf() - t6
 

@@ -8,8 +8,16 @@ and turns whatever goes wrong there into an :class:`Outcome`:
 - ``ok``: the child returned the :class:`~drivefuzz.sim.execute.Execution`;
 - ``simulator-crash``: the child died (a signal such as SIGSEGV/SIGABRT, or an exit);
 - ``hang``: no answer within the wall-clock limit (the child is killed);
-- ``plugin-error``: an ADS or oracle plugin raised (:class:`~drivefuzz.errors.PluginError`);
+- ``plugin-error``: an ADS or oracle plugin raised (:class:`~drivefuzz.errors.PluginError`; ``Outcome.plugin``
+  says which);
 - ``internal-error``: any other exception in the child (a SUMO error, or a drivefuzz bug).
+
+Only some of these are the ADS's fault (:func:`failure_fault`): an ADS plugin that raises or never answers is a
+finding; SUMO dying, drivefuzz's own bugs and an oracle plugin's exceptions are errors of the tool, kept and
+shown as such but never counted as findings of the ADS. A child that dies or hangs cannot say who it was in:
+:mod:`faulthandler` writes its Python stack to a file in its TMPDIR (on a fatal signal; on a hang the parent
+asks for it with SIGUSR1 before the kill), which becomes the Outcome's traceback, and the plugin whose code
+was running (:func:`blame_stack`) its ``plugin``: SUMO or drivefuzz itself when neither's was.
 
 The parent restarts a dead child before the next execution (about 0.4 s), so a
 campaign goes on. The child is started with :mod:`subprocess`, not
@@ -30,8 +38,10 @@ Protocol on the child's stdin/stdout: 8-byte big-endian length + pickle, both wa
 
 from __future__ import annotations
 
+import faulthandler
 import os
 import pickle
+import re
 import select
 import shutil
 import signal
@@ -45,11 +55,14 @@ import traceback
 from dataclasses import dataclass
 from typing import Any, BinaryIO
 
-from drivefuzz.errors import PluginError, SimulationError
+from drivefuzz.errors import ADS_PLUGIN, ORACLE_PLUGIN, PluginError, SimulationError
 
 OK, CRASH, HANG, PLUGIN_ERROR, INTERNAL_ERROR = "ok", "simulator-crash", "hang", "plugin-error", "internal-error"
 #: Finding kinds that are not oracle verdicts but failures of the system under test or of SUMO.
 FAILURE_KINDS = (CRASH, HANG, PLUGIN_ERROR, INTERNAL_ERROR)
+#: The ``fault`` of a failed execution that is not the ADS's (:func:`failure_fault`): SUMO or drivefuzz
+#: itself failed, or an oracle plugin raised. Such an execution is an error of the tool, not a finding.
+TOOL_FAULT, ORACLE_FAULT = "tool", "oracle-plugin"
 
 _MAGIC = b"DFZ1"
 _HEADER = struct.Struct(">4sQ")  # magic, length: anything else on the pipe is a protocol error
@@ -75,6 +88,89 @@ class Outcome:
     error_type: str = ""  # exception class name, or signal name
     traceback: str = ""
     wall_time: float = 0.0  # [s] as seen by the parent
+    plugin: str = ""  # PLUGIN_ERROR: which kind of plugin raised (errors.ADS_PLUGIN, errors.ORACLE_PLUGIN; "": unsaid)
+
+    @property
+    def fault(self) -> str:
+        """Who a failed execution is blamed on: "ego", or :data:`TOOL_FAULT` / :data:`ORACLE_FAULT`."""
+        return failure_fault(self.status, self.plugin)
+
+
+def failure_fault(status: str, plugin: str = "") -> str:
+    """The ``fault`` of a failed execution (``status`` one of :data:`FAILURE_KINDS`).
+
+    "ego" (a finding) when the ADS plugin raised, or when the execution hung: the wall-clock limit is far beyond
+    what SUMO and the oracles take, and a planner that never returns is the usual cause (the host cannot tell
+    who hung). :data:`ORACLE_FAULT` when an oracle plugin raised. :data:`TOOL_FAULT` for everything else: the
+    simulation process died (SUMO's native code, as far as the host can tell), an exception that no plugin
+    raised (a SUMO error, a drivefuzz bug), or a plugin error that does not say whose it is."""
+    if plugin == ADS_PLUGIN or (status == HANG and plugin == ""):
+        return "ego"
+    if plugin == ORACLE_PLUGIN:
+        return ORACLE_FAULT
+    return TOOL_FAULT
+
+
+#: the child's :mod:`faulthandler` file, in its TMPDIR
+STACK_FILE = "faulthandler.txt"
+#: ``plugin`` of a crash or hang whose stack shows SUMO or drivefuzz running, not a plugin
+NO_PLUGIN = "none"
+_FRAME = re.compile(r'^\s*File "(?P<file>.*)", line (?P<line>\d+) in (?P<func>\S+)')
+#: where execute.py calls plugins (_Run's method -> the ADS's methods called there, None: only the ADS's; a
+#: call there to anything else is an oracle's)
+_ADS_CALLS = {"ads_step": None, "take_over_ego": None, "run_oracles": {"done"}, "finish": {"trace_info"},
+              "reset_plugins": {"reset"}}
+
+
+def blame_stack(dump: str) -> str:
+    """Whose code ran when the child died or hung, from its faulthandler ``dump``: :data:`ADS_PLUGIN`,
+    :data:`ORACLE_PLUGIN`, :data:`NO_PLUGIN` (SUMO, or drivefuzz itself), or "" (no execution's stack in it).
+
+    The main thread's stack (the one through ``_serve``) is read from its innermost frame in
+    ``drivefuzz/sim/execute.py``: what that frame called is SUMO's or drivefuzz's when it is a file of
+    libsumo, traci or drivefuzz (or there is none: native code called from execute.py), else a plugin's,
+    the ADS's or an oracle's by the method it was in."""
+    for block in re.split(r"\n(?=\S)", dump):
+        frames = [m.groupdict() for m in map(_FRAME.match, block.splitlines()) if m]  # most recent first
+        if not any(f["func"] == "_serve" for f in frames):
+            continue
+        at = next((i for i, f in enumerate(frames) if _in_execute(f["file"])), None)
+        if at is None:
+            return ""
+        callee = frames[at - 1] if at > 0 else None
+        if callee is None or _not_a_plugin(callee["file"]):
+            return NO_PLUGIN
+        step = frames[at]["func"]
+        if step not in _ADS_CALLS:  # no plugin is called there: a library drivefuzz called
+            return NO_PLUGIN
+        if step == "reset_plugins":  # the ADS's reset comes before the oracles' loop in reset_plugins
+            return ADS_PLUGIN if int(frames[at]["line"]) < _oracle_reset_line() else ORACLE_PLUGIN
+        ads_calls = _ADS_CALLS[step]
+        return ADS_PLUGIN if ads_calls is None or callee["func"] in ads_calls else ORACLE_PLUGIN
+    return ""
+
+
+_PACKAGE = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # drivefuzz/
+
+
+def _in_execute(path: str) -> bool:
+    return os.path.normpath(path).endswith(os.path.join("drivefuzz", "sim", "execute.py"))
+
+
+def _not_a_plugin(path: str) -> bool:
+    """A file of drivefuzz (this one, which the child runs too) or of SUMO's Python bindings."""
+    path = os.path.abspath(path)
+    return path.startswith(_PACKAGE + os.sep) or os.path.basename(os.path.dirname(path)) in ("libsumo", "traci")
+
+
+def _oracle_reset_line() -> int:
+    """The line of execute.py's ``_Run.reset_plugins`` where the oracles' resets begin."""
+    import inspect
+
+    from drivefuzz.sim.execute import _Run
+
+    lines, first = inspect.getsourcelines(_Run.reset_plugins)
+    return first + next(i for i, line in enumerate(lines) if "for oracle" in line)
 
 
 def _send(fh: BinaryIO, obj: Any) -> None:
@@ -249,24 +345,53 @@ class SimHost:
         try:
             reply = _receive(self.proc.stdout.fileno(), deadline)
         except TimeoutError:
+            stack = self._stack(ask=True)
             self._kill()
             return Outcome(HANG, detail=f"no result within {self.timeout_s:g} s wall-clock",
-                           error_type="timeout", wall_time=time.monotonic() - t0)
+                           error_type="timeout", wall_time=time.monotonic() - t0, traceback=stack,
+                           plugin=blame_stack(stack))
         except (ProtocolError, pickle.UnpicklingError, EOFError) as exc:
             self._kill()
             return Outcome(INTERNAL_ERROR, detail=str(exc)[:500], error_type=type(exc).__name__,
                            wall_time=time.monotonic() - t0)
         if reply is None:
             rc = self.proc.wait()
+            stack = self._stack()
             self._kill()
             name = _signal_name(rc)
             return Outcome(CRASH, detail=f"simulation process died: {name}", error_type=name,
-                           wall_time=time.monotonic() - t0)
+                           wall_time=time.monotonic() - t0, traceback=stack, plugin=blame_stack(stack))
         wall = time.monotonic() - t0
         if reply[0] == OK:
             return Outcome(OK, execution=reply[1], wall_time=wall)
-        _, status, error_type, detail, tb = reply
-        return Outcome(status, detail=detail, error_type=error_type, traceback=tb, wall_time=wall)
+        _, status, error_type, detail, tb, *plugin = reply
+        return Outcome(status, detail=detail, error_type=error_type, traceback=tb, wall_time=wall,
+                       plugin=plugin[0] if plugin else "")
+
+
+    def _stack(self, ask: bool = False) -> str:
+        """The Python stack the child's faulthandler wrote (after a fatal signal; with ``ask``, of a live child
+        that is sent SIGUSR1 for it and given up to 2 s to write it), or ""."""
+        if self._tmp is None:
+            return ""
+        path = os.path.join(self._tmp, STACK_FILE)
+        if ask and self.proc is not None and self.proc.poll() is None:
+            try:
+                os.kill(self.proc.pid, signal.SIGUSR1)
+            except ProcessLookupError:
+                pass
+            size, end = -1, time.monotonic() + 2.0
+            while time.monotonic() < end:  # until it stops growing: the handler writes it at once
+                time.sleep(0.05)
+                now = os.path.getsize(path) if os.path.exists(path) else 0
+                if now and now == size:
+                    break
+                size = now
+        try:
+            with open(path, errors="replace") as fh:
+                return fh.read(200_000)
+        except OSError:
+            return ""
 
 
 def _sweep_orphans() -> None:
@@ -320,6 +445,10 @@ def _serve() -> None:
     os.dup2(devnull, 0)
     os.close(devnull)
     sys.stdout = sys.stderr
+    # the stack on a fatal signal, or when the parent asks before killing a hung child (SUMO's or a plugin's?)
+    stack = open(os.path.join(tempfile.gettempdir(), STACK_FILE), "w")
+    faulthandler.enable(file=stack, all_threads=True)
+    faulthandler.register(signal.SIGUSR1, file=stack, all_threads=True)
 
     from drivefuzz.sim.execute import execute
     from drivefuzz.oracle import OracleSettings
@@ -334,13 +463,16 @@ def _serve() -> None:
         if msg[0] == "exit":
             return
         _, scenario_json, settings = msg
+        os.ftruncate(stack.fileno(), 0)  # only this execution's stack
+        os.lseek(stack.fileno(), 0, os.SEEK_SET)
         try:
             sc = Scenario.model_validate(scenario_json)
             ex = execute(sc, oracles=OracleSettings(settings=settings).instantiate())
             reply: tuple = (OK, ex)
         except PluginError as exc:
-            reply = ("error", PLUGIN_ERROR, type(exc.__cause__ or exc).__name__, _one_line(exc), traceback.format_exc())
-        except SystemExit as exc:  # sys.exit() in a plugin must not end the host quietly
+            reply = ("error", PLUGIN_ERROR, type(exc.__cause__ or exc).__name__, _one_line(exc), traceback.format_exc(),
+                     exc.plugin)
+        except SystemExit as exc:  # sys.exit() outside a plugin's call (execute names the plugin in those)
             reply = ("error", PLUGIN_ERROR, "SystemExit", f"sys.exit({exc.code!r}) called during the execution",
                      traceback.format_exc())
         except Exception as exc:  # noqa: BLE001 - reported to the parent, which records it and goes on

@@ -19,7 +19,11 @@ attribution, signature, reproduction, the execution that found it) and ``replay.
 hit a signature, and which, is in the campaign index; the campaign process writes it into each folder's
 ``hits.json`` (:func:`write_hits`).
 
-Simulator crashes, hangs and plugin errors have no trace: their signature is their kind and error type.
+Simulator crashes, hangs and plugin errors have no trace: their signature is their kind and error type, and
+their fault is the caller's (:func:`drivefuzz.sim.simhost.failure_fault`). Those of the ADS (it raised or hung)
+are findings; the others (SUMO died, drivefuzz or an oracle plugin raised: fault ``tool`` or ``oracle-plugin``)
+go to ``errors/<signature>-<status>/``, folders like a finding's (scenario, verdict with the error and its
+traceback, replay.sh) that report an error of the tool, never a finding of the ADS.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ from drivefuzz.storage import atomic_dir, atomic_write_json, atomic_write_text
 
 FINDINGS = "findings"
 INCIDENTS = "incidents"
+ERRORS = "errors"  # failed executions that are not the ADS's fault: errors of the tool or of an oracle plugin
 ALIASES = "triage-aliases"  # rules-only signature -> the folder its counterfactual filed it in
 
 
@@ -74,8 +79,20 @@ class TriageConfig:
     shrink: int = 0  # executions to shrink each new finding (not incidents) to a minimal reproducer (0: none)
 
 
-def _crash_key(m: Misbehavior) -> str:
-    return hashlib.sha256(f"{m.oracle}/{m.kind}".encode()).hexdigest()[:12]
+def _crash_key(m: Misbehavior, fault: str = "ego") -> str:
+    # an ADS's failures keep the keys of campaigns filed before faults were told apart (a resume adds hits to
+    # their folders); an oracle's ZeroDivisionError is not the same signature as the ADS's
+    text = f"{m.oracle}/{m.kind}" if fault == "ego" else f"{m.oracle}/{m.kind}/{fault}"
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+def folder_of(fault: str, traced: bool = True) -> str:
+    """The campaign subfolder an execution of this ``fault`` is filed in: findings, incidents or errors."""
+    if fault == "other":
+        return INCIDENTS
+    if not traced and fault != "ego":
+        return ERRORS
+    return FINDINGS
 
 
 class FindingStore:
@@ -91,7 +108,7 @@ class FindingStore:
         self.extra = extra_verdict or {}
 
     def _existing(self, key: str) -> str | None:
-        for sub in (FINDINGS, INCIDENTS):
+        for sub in (FINDINGS, INCIDENTS, ERRORS):
             folder = self.out / sub
             if folder.is_dir():
                 for p in folder.glob(f"{key}-*"):
@@ -100,14 +117,15 @@ class FindingStore:
         return None
 
     def triage(self, scenario, misbehaviors: Sequence[Misbehavior], trace, key: str, termination: str,
-               extra: dict[str, Any] | None = None) -> Triaged:
-        """File the execution ``key`` of ``scenario`` whose oracles reported ``misbehaviors``."""
+               extra: dict[str, Any] | None = None, fault: str = "ego") -> Triaged:
+        """File the execution ``key`` of ``scenario`` whose oracles reported ``misbehaviors``. Without a
+        ``trace`` (the execution failed) ``fault`` is who failed: "ego", or an error of the tool (see the module)."""
         from drivefuzz.triage.attribute import Fault, attribute, needs_replay
         from drivefuzz.triage.signature import signature
 
         m = misbehaviors[0]
         if trace is None:  # the simulator crashed or hung, or a plugin raised
-            sig_key, fault, att, sig = _crash_key(m), "ego", None, {"oracle": m.oracle, "kind": m.kind}
+            sig_key, att, sig = _crash_key(m, fault), None, {"oracle": m.oracle, "kind": m.kind, "fault": fault}
         else:
             att = attribute(scenario, trace, m, self.rmap)
             sig_obj = signature(scenario, trace, m, self.rmap, att)
@@ -150,7 +168,7 @@ class FindingStore:
 
             shrunk = shrink(scenario, m, rules_key, self.run, rules_signature(self.rmap), self.cfg.shrink,
                             known=(misbehaviors, trace))  # the run it was found in judges the window's cut
-        sub = INCIDENTS if fault == "other" else FINDINGS
+        sub = folder_of(fault, trace is not None)
         rel = f"{sub}/{sig_key}-{m.oracle}"
         with atomic_dir(self.out / rel) as tmp:
             write_scenario(scenario, tmp, portable=True)  # with its network: it replays wherever it is copied
@@ -185,8 +203,9 @@ class FindingStore:
     # that a repeat of the event does not replay the careful driver again.
     def _fault_of(self, rel: str, default: str) -> str:
         try:
-            att = json.loads((self.out / rel / "verdict.json").read_text()).get("attribution") or {}
-        except (OSError, ValueError):
+            v = json.loads((self.out / rel / "verdict.json").read_text())
+            att = v.get("attribution") or v.get("signature") or {}  # a failed execution's is in its signature
+        except (OSError, ValueError, AttributeError):
             return default
         return att.get("fault", default) if isinstance(att, dict) else default
 
