@@ -125,6 +125,12 @@ def test_the_cli_counts_an_oracle_error_as_the_tool_failing_not_as_a_finding(tmp
     assert "oracle-plugin" in result.output and "drivefuzz replay" in result.output
     rows = CliRunner().invoke(main, ["findings", str(tmp_path / "o"), "--json"])
     assert rows.exit_code == 0 and json.loads(rows.output) == [], rows.output
+    rows = CliRunner().invoke(main, ["findings", str(tmp_path / "o"), "--errors", "--json"])
+    assert [(r["folder"].split("/")[0], r["fault"]) for r in json.loads(rows.output)] == [("errors", ORACLE_FAULT)]
+    report = CliRunner().invoke(main, ["report", str(tmp_path / "o")])
+    assert report.exit_code == 0, report.output
+    md = (tmp_path / "o" / "report.md").read_text()
+    assert "0 finding(s)" in md and "## Errors of the tool (not findings of the ADS)" in md and ORACLE_FAULT in md
 
 
 def test_a_crash_or_hang_is_blamed_on_the_plugin_whose_code_was_running(town_scenario, failing_oracle):

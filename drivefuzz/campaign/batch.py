@@ -203,7 +203,7 @@ def results_table(out: Path, spec: CampaignFile) -> list[dict[str, Any]]:
         row: dict[str, Any] = {"cell": cell_label(network, strategy, ads, seed), "folder": f"cells/{name}",
                                "network": Path(network).name, "strategy": strategy, "ads": ads.name,
                                "ads_options": json.dumps(ads.options, sort_keys=True), "seed": seed,
-                               "execs": 0, "findings": 0, "distinct": 0, "incidents": 0, "by_oracle": "",
+                               "execs": 0, "findings": 0, "distinct": 0, "incidents": 0, "errors": 0, "by_oracle": "",
                                "status": "not started"}
         if (d / "index.sqlite").exists():
             try:
@@ -220,6 +220,8 @@ def results_table(out: Path, spec: CampaignFile) -> list[dict[str, Any]]:
                                   if f.path.joinpath("hits.json").exists() else 1 for f in found)
             row["distinct"] = len(found)  # one folder per signature
             row["incidents"] = sum(1 for f in (d / "incidents").glob("*/verdict.json")) if (d / "incidents").is_dir() else 0
+            # executions the tool failed (SUMO, drivefuzz, an oracle plugin): signatures, not findings
+            row["errors"] = sum(1 for f in (d / "errors").glob("*/verdict.json")) if (d / "errors").is_dir() else 0
             counts: dict[str, int] = {}
             for f in found:
                 counts[f.misbehavior.oracle] = counts.get(f.misbehavior.oracle, 0) + 1
@@ -248,7 +250,7 @@ def write_results(out: Path, rows: list[dict[str, Any]]) -> None:
     w.writeheader()
     w.writerows(rows)
     atomic_write_text(out / "results.csv", buf.getvalue())
-    cols = ["cell", "folder", "execs", "findings", "distinct", "incidents", "by_oracle", "status"]
+    cols = ["cell", "folder", "execs", "findings", "distinct", "incidents", "errors", "by_oracle", "status"]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     lines += ["| " + " | ".join(str(r[c]) for c in cols) + " |" for r in rows]
     from drivefuzz.campaign.compare import comparison_markdown, configurations, write_batch_report

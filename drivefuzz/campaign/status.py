@@ -44,6 +44,7 @@ class Status:
     workers: int | None  # workers there are (None: a scheduler's, not known here)
     jobs: str  # "3/8 done"
     coverage: str = "-"  # interaction coverage: "N/M cells (P %)" (drivefuzz.triage.coverage)
+    errors: int = 0  # signatures of executions the tool failed (SUMO, drivefuzz, an oracle plugin): not findings
 
 
 def read_status(campaigns: Sequence[Any], workers: int | None) -> Status:
@@ -65,7 +66,7 @@ def read_status(campaigns: Sequence[Any], workers: int | None) -> Status:
         last_finding=newest.last_finding if newest is not None else None,
         busy=sum(p.jobs_running for p in ps), workers=workers,
         jobs=f"{sum(p.jobs_done for p in ps)}/{sum(p.jobs_total for p in ps)} done",
-        coverage=_coverage(campaigns))
+        coverage=_coverage(campaigns), errors=sum(len(getattr(c, "errors", ())) for c in campaigns))
 
 
 #: id(campaign) -> (campaign, its JournalCells, the cells its seeds offer, the cells its executions reached)
@@ -117,7 +118,7 @@ def plain_line(s: Status) -> str:
     last = f"  last: {s.last_finding}" if s.last_finding else ""
     return (f"elapsed {format_duration(s.elapsed_s)}  remaining {s.remaining}  execs {s.execs} ({s.rate:.2f}/s)  "
             f"{s.where}  best risk {risk}  findings {len(s.findings)} ({hits} hits), incidents {s.incidents}"
-            f"{last}  workers busy {_busy(s)}  jobs {s.jobs}  coverage {s.coverage}")
+            f"{f', tool errors {s.errors}' if s.errors else ''}{last}  workers busy {_busy(s)}  jobs {s.jobs}  coverage {s.coverage}")
 
 
 def _busy(s: Status) -> str:
@@ -140,6 +141,8 @@ def screen(s: Status, title: str):
     figures.add_row("now at", s.where, "workers busy", _busy(s))
     figures.add_row("jobs", s.jobs, "incidents", f"{s.incidents} (not the ego's fault)")
     figures.add_row("last finding", s.last_finding or "-", "coverage", s.coverage)
+    if s.errors:  # SUMO, drivefuzz or an oracle plugin failed: the user must know, but they are not findings
+        figures.add_row("", "", "tool errors", f"{s.errors} (not findings: errors/)")
     found = Table(title=f"findings by signature ({len(s.findings)})", title_justify="left", expand=True)
     found.add_column("#", justify="right", width=3)
     found.add_column("hits", justify="right", width=5)

@@ -106,10 +106,13 @@ def campaign(campaign_file, out, resume_dir, trusted_ads):
     for r in rows:
         if r["execs"] == 0:
             click.echo(f"{r['cell']} ({r['folder']}): {NO_EXECUTIONS}", err=True)
+        if r.get("errors"):
+            click.echo(f"{r['cell']} ({r['folder']}): {r['errors']} error(s) of the tool (SUMO, drivefuzz or an oracle "
+                       "plugin failed; not findings): drivefuzz findings --errors lists them", err=True)
     click.echo(f"results in {out_dir / 'results.csv'}")
     if any(r["status"] != "done" for r in rows):
         click.echo(f"continue with: drivefuzz campaign --resume {out_dir}", err=True)
     if aborted:
         sys.exit(EXIT_ABORTED)
-    failed = any(camp.failed_jobs for camp in campaigns)
+    failed = any(camp.failed_jobs or camp.errors for camp in campaigns)
     sys.exit(EXIT_FOUND if any(r["findings"] for r in rows) else (EXIT_INTERNAL if failed else EXIT_CLEAN))

@@ -222,22 +222,27 @@ def ads_cmd():
 @click.argument("out", type=click.Path())
 @click.option("--json", "as_json", is_flag=True, help="Print the rows as a JSON list.")
 @click.option("--incidents", is_flag=True, help="List the incidents (not the ego's fault) too.")
+@click.option("--errors", is_flag=True, help="List the executions the tool failed (SUMO, drivefuzz or an oracle "
+              "plugin: not findings of the ADS) too.")
 @handle_errors
-def findings_cmd(out, as_json, incidents):
+def findings_cmd(out, as_json, incidents, errors):
     """List a campaign's findings, numbered in the order they were first found (exit 0: a listing)."""
     from drivefuzz.triage.table import check_campaign_dir, finding_rows, format_groups, format_table, read_executions
 
     execs = read_executions(check_campaign_dir(out))
     rows = finding_rows(out, executions=execs)
     extra = finding_rows(out, incidents=True, executions=execs) if incidents else []
+    failed = finding_rows(out, executions=execs, errors=True) if errors else []
     if as_json:
-        click.echo(json.dumps([r.as_json() for r in rows + extra], indent=2))
+        click.echo(json.dumps([r.as_json() for r in rows + extra + failed], indent=2))
         return
     click.echo(format_table(rows, "findings (the ego's fault)"))
     if len(rows) > 1:
         click.echo(format_groups(rows))
     if incidents:
         click.echo(format_table(extra, "incidents (not the ego's fault)"))
+    if errors:
+        click.echo(format_table(failed, "errors of the tool (SUMO, drivefuzz or an oracle plugin; not findings)"))
 
 
 @click.command("coverage")

@@ -56,6 +56,7 @@ def write_report(out: str | Path, html_path: str | Path | None = None, max_cards
     info = load_campaign_info(out)
     findings = finding_rows(info.out, executions=info.executions)
     incidents = finding_rows(info.out, incidents=True, executions=info.executions)
+    errors = finding_rows(info.out, executions=info.executions, errors=True)  # listed, no cards: no trace
     plt = pyplot()
     cards: list[Card] = []
     for row in (findings + incidents)[:max_cards]:
@@ -71,8 +72,8 @@ def write_report(out: str | Path, html_path: str | Path | None = None, max_cards
     from drivefuzz.storage import atomic_write_text
 
     cov = _coverage(info.out)
-    for path, text in ((html_path, render_html(info, findings, incidents, cards, risk, notes, cov)),
-                       (md_path, render_markdown(info, findings, incidents, cards, notes, cov))):
+    for path, text in ((html_path, render_html(info, findings, incidents, cards, risk, notes, cov, errors)),
+                       (md_path, render_markdown(info, findings, incidents, cards, notes, cov, errors))):
         atomic_write_text(path, text)
         path.chmod(0o644)  # a report is for reading (the temporary file it replaced was private)
     return html_path, md_path
@@ -296,7 +297,8 @@ def _minimal_html(r) -> str:
 
 
 def render_html(info: CampaignInfo, findings: list[FindingRow], incidents: list[FindingRow], cards: list[Card],
-                risk_png: bytes | None, notes: list[str], coverage: dict[str, Any] | None = None) -> str:
+                risk_png: bytes | None, notes: list[str], coverage: dict[str, Any] | None = None,
+                errors: list[FindingRow] = ()) -> str:
     from drivefuzz.triage.coverage_map import CSS as COVERAGE_CSS, section_html
 
     facts = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v)}</dd>" for k, v in campaign_facts(info))
@@ -306,6 +308,7 @@ def render_html(info: CampaignInfo, findings: list[FindingRow], incidents: list[
         f"<title>drivefuzz report: {_e(info.out.name)}</title><style>{_CSS}{COVERAGE_CSS}</style></head><body>",
         f"<h1>drivefuzz report: {_e(info.out.name)}</h1>",
         f'<p class="sub">{len(findings)} finding(s) and {len(incidents)} incident(s), one per signature; '
+        + (f"{len(errors)} error(s) of the tool (not findings); " if errors else "") +
         f"written {_e(time.strftime('%Y-%m-%d %H:%M'))}</p>",
         *(f'<p class="note">{_e(n)}</p>' for n in notes),
         f'<h2>The campaign</h2><dl class="facts">{facts}</dl>',
@@ -316,10 +319,15 @@ def render_html(info: CampaignInfo, findings: list[FindingRow], incidents: list[
         *(_card_html(by_folder[r.folder]) for r in findings if r.folder in by_folder),
         "<h2>Incidents (not the ego's fault)</h2>" + (_table_html(incidents) if incidents else "<p>None.</p>"),
         *(_card_html(by_folder[r.folder]) for r in incidents if r.folder in by_folder),
+        *([f"<h2>{_e(_ERRORS_TITLE)}</h2><p>{_e(_ERRORS_NOTE)}</p>" + _table_html(list(errors))] if errors else []),
         "</body></html>",
     ]
     return "\n".join(parts)
 
+
+_ERRORS_TITLE = "Errors of the tool (not findings of the ADS)"
+_ERRORS_NOTE = ("Executions that SUMO, drivefuzz or an oracle plugin failed (fault tool or oracle-plugin): not bugs of "
+                "the ADS. Each folder's verdict.json holds the error and its traceback; replay.sh runs it again.")
 
 _GROUPS_NOTE = ("Findings that one attribution rule blamed on the ego, with the same oracle and kind, are likely "
                 "one bug of the ADS met in several situations (signatures).")
@@ -357,13 +365,14 @@ def _table_md(rows: list[FindingRow]) -> list[str]:
 
 
 def render_markdown(info: CampaignInfo, findings: list[FindingRow], incidents: list[FindingRow], card_list: list[Card],
-                    notes: list[str], coverage: dict[str, Any] | None = None) -> str:
+                    notes: list[str], coverage: dict[str, Any] | None = None, errors: list[FindingRow] = ()) -> str:
     from drivefuzz.triage.ads_info import to_markdown
     from drivefuzz.triage.coverage_map import section_md
 
     cards = {c.row.folder: c for c in card_list}
     lines = [f"# drivefuzz report: {info.out.name}", "",
              f"{len(findings)} finding(s) and {len(incidents)} incident(s), one per signature. "
+             + (f"{len(errors)} error(s) of the tool (not findings). " if errors else "") +
              "The pictures are in report.html.", "", *(f"> {n}" for n in notes), "", "## The campaign", ""]
     lines += [f"- **{k}**: {_md_cell(v)}" for k, v in campaign_facts(info)] + [""]
     lines += section_md(coverage)
@@ -383,4 +392,6 @@ def render_markdown(info: CampaignInfo, findings: list[FindingRow], incidents: l
             if r.minimal is not None:
                 lines += [f"- minimal reproducer ({r.minimal.split(': ', 1)[0]}):", "", "```sh", r.minimal_replay,
                           "```", ""]
+    if errors:
+        lines += [f"## {_ERRORS_TITLE}", "", _ERRORS_NOTE, "", *_table_md(list(errors))]
     return "\n".join(lines)

@@ -22,7 +22,7 @@ from typing import Any
 
 from drivefuzz.errors import InvalidConfig
 
-FINDINGS, INCIDENTS = "findings", "incidents"
+FINDINGS, INCIDENTS, ERRORS = "findings", "incidents", "errors"  # errors: of the tool (triage.store), not findings
 #: per-execution timings that add up to its share of the campaign's wall time [s]
 #: (``storage`` includes triage; the simulation's own parts are inside ``wall_time``)
 ELAPSED_PARTS = ("isolation", "mutation", "quality", "storage")
@@ -191,12 +191,13 @@ def load_campaign_info(out: str | Path) -> CampaignInfo:
 
 
 def finding_rows(out: str | Path, incidents: bool = False,
-                 executions: list[Execution] | None = None) -> list[FindingRow]:
-    """One row per finding folder (or incident folder), numbered in the order they were first found."""
+                 executions: list[Execution] | None = None, errors: bool = False) -> list[FindingRow]:
+    """One row per finding folder (or incident folder, or with ``errors`` a folder of an execution the tool
+    failed: SUMO, drivefuzz or an oracle plugin; not a finding), numbered in the order they were first found."""
     from drivefuzz.campaign.fuzz import replay_command
 
     out = check_campaign_dir(out)
-    sub = INCIDENTS if incidents else FINDINGS
+    sub = ERRORS if errors else INCIDENTS if incidents else FINDINGS
     execs = read_executions(out) if executions is None else executions
     first: dict[str, tuple[int, str, float]] = {}  # folder -> (exec_id, key, campaign time) of its first hit
     counts: dict[str, int] = {}
