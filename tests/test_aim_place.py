@@ -812,3 +812,25 @@ def test_a_follower_aimed_at_a_turn_follows_the_ego_into_it_and_is_met_behind_it
         assert met and all(e.party == "vehicle/behind" for e in met), met
         hits += any(e.manoeuvre == "turn_right" for e in met)
     assert hits >= 2, hits
+
+
+def test_a_crossing_car_aimed_where_the_ego_drives_through_on_green_runs_its_red_and_meets_it(intersection_seeds):
+    """Where the ego cruises (or accelerates, or brakes) through a junction on green, the cross stream's light is red:
+    a lawful crossing car stood at it and never met the ego. Aimed at such a manoeuvre, a crossing car's conflict
+    point lies where the ego's profile does it, and the car runs its red (`python tools/lab_aim.py --network
+    intersection --cells vehicle/crossing_ --draws 2`: accelerate and cruise 6 -> 15 of 96 builds reached)."""
+    from drivefuzz.campaign.job import TRAVEL_EVERY_S, ego_travel
+    from drivefuzz.search.aim import aimed
+
+    sc = intersection_seeds[5]  # straight through C on green
+    mut = Mutator(load_roadmap(sc.network_path()))
+    mut.observe(sc, ego_travel(execute(sc).trace), TRAVEL_EVERY_S)
+    cell = "party-manoeuvre:vehicle/crossing_left|cruise"
+    hits = 0
+    for k in range(4):
+        m, _ = aimed(mut, sc, cell, random.Random(k))
+        (a,) = m.scenario.actors[len(sc.actors):]
+        assert a.nav is NavType.LINEAR and "running its red" in m.description, m.description
+        ex = run(m.scenario)
+        hits += cell in execution_cells(m.scenario, ex.trace, mut.rmap, risk_score(ex.trace))
+    assert hits >= 2, hits

@@ -221,13 +221,13 @@ def walker_crosses(mut, sc, rng, early=(0.0, 4.0), at: float | None = None):
     return [a], [], {}, f"{a.id} crosses at {spot.lane} @ {spot.pos:.1f} m, leaving at {depart} s"
 
 
-def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool = False, whole: bool = False):
+def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool | None = False, whole: bool = False):
     """A lawful vehicle on another approach to a junction of the ego's route, timed to reach the conflict
     point with the ego: whoever must yield has to (straight crossing paths, left turn across path). With
     ``keep``, only the conflicts (``Mutator._conflicts``' tuples) it accepts (:mod:`drivefuzz.search.aim`).
     With ``runs_red``, a driver who ignores its light (and every other rule), reaching the conflict point
     0.2-1.5 s after the ego: where the ego enters on yellow the cross stream's light is red, and a lawful car there
-    waits. With ``whole``, at the junctions of the whole route, not only within ``conflict_range``, and a car that
+    waits; ``runs_red`` None: such a driver only where no lawful car's light lets it through as the ego comes. With ``whole``, at the junctions of the whole route, not only within ``conflict_range``, and a car that
     would drive longer than :data:`LATE_RUN_UP_S` to the conflict departs later, that long before it meets the ego
     (a junction reached after some 60 s needs 400 m of road upstream on the cross approach otherwise: walked back
     at random through the junctions before it, such a start was on the ego's own route on town's seed 005, where
@@ -242,6 +242,8 @@ def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool = False, whole: boo
         return None
     free = [] if runs_red else [o for o in options if not _light_stops(
         mut, sc, o[2], o[3], mut._ego_eta(sc, o[1]) - o[4] / (0.8 * lane_limit(mut, o[2])))]
+    if runs_red is None:  # where no car can come lawfully, one that runs its red
+        runs_red = not free
     i, s_c, lane_id, dest, d_c, node, _, _ = rng.choice(free or options)
     t_meet = mut._ego_eta(sc, s_c) + (rng.uniform(0.2, 1.5) if runs_red else rng.uniform(-1.0, 1.5))
     speed = round(lane_limit(mut, lane_id) * rng.uniform(0.6, 1.0), 2)
