@@ -51,9 +51,10 @@ from drivefuzz.search import catalogue as cat
 from drivefuzz.search import programs as prog
 from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
-from drivefuzz.search.aim_place import (FOLLOW_TURN_CLOSE_S, GRIP_ACCEL_LENGTH_M, GRIP_START_BEHIND_M, GRIP_START_LENGTH_M,
-                                        GRIP_START_MU, JUNCTION_COLUMNS, START_SPOTS_M, drawn_level, follower_at,
-                                        grip_at, into_lane, lane_change_moves, meeting, passes, profile_spots,
+from drivefuzz.search.aim_place import (FOLLOW_TURN_CLOSE_S, GRIP_ACCEL_LENGTH_M, GRIP_START_BEHIND_M,
+                                        GRIP_START_LENGTH_M, GRIP_START_MU, JUNCTION_COLUMNS, START_SPOTS_M,
+                                        drawn_level, follower_at, grip_at, into_lane, lane_change_moves, meeting,
+                                        passes, profile_spots,
                                         shifted_start, started_at_speed, stopped_on_ring, stopped_past,
                                         walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator

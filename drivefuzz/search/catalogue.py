@@ -227,8 +227,9 @@ def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool | None = False, who
     ``keep``, only the conflicts (``Mutator._conflicts``' tuples) it accepts (:mod:`drivefuzz.search.aim`).
     With ``runs_red``, a driver who ignores its light (and every other rule), reaching the conflict point
     0.2-1.5 s after the ego: where the ego enters on yellow the cross stream's light is red, and a lawful car there
-    waits; ``runs_red`` None: such a driver only where no lawful car's light lets it through as the ego comes. With ``whole``, at the junctions of the whole route, not only within ``conflict_range``, and a car that
-    would drive longer than :data:`LATE_RUN_UP_S` to the conflict departs later, that long before it meets the ego
+    waits; ``runs_red`` None: such a driver only where no lawful car's light lets it through as the ego comes.
+    With ``whole``, at the junctions of the whole route, not only within ``conflict_range``, and a car that would
+    drive longer than :data:`LATE_RUN_UP_S` to the conflict departs later, that long before it meets the ego
     (a junction reached after some 60 s needs 400 m of road upstream on the cross approach otherwise: walked back
     at random through the junctions before it, such a start was on the ego's own route on town's seed 005, where
     the car waited at a light ahead of the ego and never came to the junction it was timed for)."""

@@ -32,8 +32,8 @@ detection is only a cross-check (it misses lateral and off-lane contact).
 Linear and immobile pedestrians are placed by the executor (``person.moveToXY``)
 every step; their recorded speed is the walked one. An exception in plugin code
 (ADS or oracle) leaves :func:`execute` as a :class:`~drivefuzz.errors.PluginError`
-naming the plugin and saying which kind it is (``plugin``). ``Execution.timings``: seconds per stage, ``setup``, ``sumo``
-(steps 9-10, and SUMO's own start and close), ``world`` (1), ``record`` (2), ``oracles`` (3), ``observe`` (5),
+naming the plugin and saying which kind it is (``plugin``). ``Execution.timings``: seconds per stage, ``setup``,
+``sumo`` (steps 9-10, and SUMO's own start and close), ``world`` (1), ``record`` (2), ``oracles`` (3), ``observe`` (5),
 ``ads`` (6), ``physics`` (7-8); ``tools/bench_exec.py`` prints them.
 """
 
