@@ -788,25 +788,36 @@ def test_a_car_or_a_patch_aimed_at_the_ego_s_standing_start_is_met_as_it_pulls_a
         assert hits >= 2, cell
 
 
+def _paced(sc) -> Mutator:
+    """A mutator for ``sc``'s network that times aims by the seed run's own pace, as a fuzz job's does."""
+    from drivefuzz.campaign.job import TRAVEL_EVERY_S, ego_travel
+
+    mut = Mutator(load_roadmap(sc.network_path()))
+    mut.observe(sc, ego_travel(execute(sc).trace), TRAVEL_EVERY_S)
+    return mut
+
+
+def _aimed_runs(mut: Mutator, sc, cell: str, n: int):
+    """``n`` aimed builds for ``cell`` on ``sc`` (draw k from ``Random(k)``), each with the one actor it added and
+    its run: (mutation, actor, execution)."""
+    from drivefuzz.search.aim import aimed
+
+    for k in range(n):
+        m, _ = aimed(mut, sc, cell, random.Random(k))
+        (a,) = m.scenario.actors[len(sc.actors):]
+        yield m, a, run(m.scenario)
+
 def test_a_follower_aimed_at_a_turn_follows_the_ego_into_it_and_is_met_behind_it_there(intersection_seeds):
     """A follower aimed at a turn comes up behind the ego before the junction, follows it close into the turn and
     closes in there; it is read as behind the ego, although 2 s before the encounter it heads another way than the
     ego (the ego has begun to turn), because it is on the ego's path and goes the ego's way there. (Timed to reach
     the ego's rear at the turn's place, the follower met it before the turn, in a cruise or stop and go, or read as
     crossing it: `python tools/lab_aim.py --network intersection --cells "behind|turn_"`, 0 of 10 reached.)"""
-    from drivefuzz.campaign.job import TRAVEL_EVERY_S, ego_travel
-    from drivefuzz.search.aim import aimed
-
     sc = intersection_seeds[0]  # a right turn from WC into CW, on green
-    mut = Mutator(load_roadmap(sc.network_path()))
-    mut.observe(sc, ego_travel(execute(sc).trace), TRAVEL_EVERY_S)
-    cell = "party-manoeuvre:vehicle/behind|turn_right"
+    mut = _paced(sc)
     hits = 0
-    for k in range(4):
-        m, _ = aimed(mut, sc, cell, random.Random(k))
-        (a,) = m.scenario.actors[len(sc.actors):]
+    for m, a, ex in _aimed_runs(mut, sc, "party-manoeuvre:vehicle/behind|turn_right", 4):
         assert [s.action.value for s in a.maneuvers] == ["follow", "close"] and a.maneuvers[1].time > 0.0
-        ex = run(m.scenario)
         r = risk_score(ex.trace)
         met = [classify(m.scenario, ex.trace, mut.rmap, who, f) for who, f in close_encounters(r) if who == a.id]
         assert met and all(e.party == "vehicle/behind" for e in met), met
@@ -819,18 +830,11 @@ def test_a_crossing_car_aimed_where_the_ego_drives_through_on_green_runs_its_red
     a lawful crossing car stood at it and never met the ego. Aimed at such a manoeuvre, a crossing car's conflict
     point lies where the ego's profile does it, and the car runs its red (`python tools/lab_aim.py --network
     intersection --cells vehicle/crossing_ --draws 2`: accelerate and cruise 6 -> 15 of 96 builds reached)."""
-    from drivefuzz.campaign.job import TRAVEL_EVERY_S, ego_travel
-    from drivefuzz.search.aim import aimed
-
     sc = intersection_seeds[5]  # straight through C on green
-    mut = Mutator(load_roadmap(sc.network_path()))
-    mut.observe(sc, ego_travel(execute(sc).trace), TRAVEL_EVERY_S)
+    mut = _paced(sc)
     cell = "party-manoeuvre:vehicle/crossing_left|cruise"
     hits = 0
-    for k in range(4):
-        m, _ = aimed(mut, sc, cell, random.Random(k))
-        (a,) = m.scenario.actors[len(sc.actors):]
+    for m, a, ex in _aimed_runs(mut, sc, cell, 4):
         assert a.nav is NavType.LINEAR and "running its red" in m.description, m.description
-        ex = run(m.scenario)
         hits += cell in execution_cells(m.scenario, ex.trace, mut.rmap, risk_score(ex.trace))
     assert hits >= 2, hits
