@@ -118,7 +118,8 @@ def plain_line(s: Status) -> str:
     last = f"  last: {s.last_finding}" if s.last_finding else ""
     return (f"elapsed {format_duration(s.elapsed_s)}  remaining {s.remaining}  execs {s.execs} ({s.rate:.2f}/s)  "
             f"{s.where}  best risk {risk}  findings {len(s.findings)} ({hits} hits), incidents {s.incidents}"
-            f"{f', tool errors {s.errors}' if s.errors else ''}{last}  workers busy {_busy(s)}  jobs {s.jobs}  coverage {s.coverage}")
+            f"{f', tool errors {s.errors}' if s.errors else ''}{last}  workers busy {_busy(s)}  jobs {s.jobs}  "
+            f"coverage {s.coverage}")
 
 
 def _busy(s: Status) -> str:
