@@ -52,7 +52,8 @@ from drivefuzz.search import programs as prog
 from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
 from drivefuzz.search.aim_place import (FOLLOW_TURN_CLOSE_S, GRIP_ACCEL_LENGTH_M, GRIP_START_BEHIND_M,
-                                        GRIP_START_LENGTH_M, GRIP_START_MU, JUNCTION_COLUMNS, START_SPOTS_M,
+                                        GRIP_START_LENGTH_M, GRIP_START_MU, JUNCTION_COLUMNS,
+                                        LATE_CHANGE_CLEARS_S, LATE_CHANGE_ROOM_M, START_SPOTS_M,
                                         drawn_level, follower_at, grip_at, into_lane, lane_change_moves, meeting,
                                         passes, profile_spots,
                                         shifted_start, started_at_speed, stopped_on_ring, stopped_past,
@@ -90,6 +91,8 @@ MOVING_START_AHEAD = ("lead_brakes", "brake_check", "lead_slower", "slow_ahead")
 #: [m] from a place where the ego accelerates, brakes or cruises (its profile's, every 5 m) that a conflict point of a
 #: crossing car aimed at that manoeuvre lies
 CONFLICT_NEAR_M = 5.0
+#: share of the aims at a crossing car in a lane change that start the ego late on a lane that does not lead on
+LATE_CHANGE_SHARE = 0.7
 #: [m] past a lane change's place where an oncoming car is level with the ego
 ONCOMING_AFTER_CHANGE_M = 12.0
 #: share of the aimed components built on the mission alone (the parent's actors, puddles and light shifts
@@ -148,6 +151,12 @@ def _said(m: Mutation, bare: str) -> Mutation:
 def _aimed_party(mut: Mutator, sc: Scenario, cell: str, row: str, col: str, rng: random.Random) -> Mutation:
     """``sc`` with a component built for the party x column ``cell``; ``sc`` itself (said why) when it cannot."""
     base, at, setup = meeting(mut, sc, col, rng)
+    if col == "lane_change" and row in ("vehicle/crossing_left", "vehicle/crossing_right") \
+            and rng.random() < LATE_CHANGE_SHARE:  # a late change, and a car across its way just after it
+        late = shifted_start(mut, sc, rng, room=LATE_CHANGE_ROOM_M)
+        if late is not None:
+            situation = Situation("crossing", "", partial(_late_change, want=row.split("/", 1)[1]))
+            return _built(mut, sc, late[0], cell, late[1], situation, rng)
     if col == "lane_change":
         on, moves = sc, lane_change_moves(mut, sc)
         if not moves:  # the route needs no lane change from the seed's start lane: start on one that needs it
@@ -425,12 +434,7 @@ def _crossing(mut, sc, rng, want: str, col: str, at: float | None = None):
             return False
         if near and not any(abs(s_c - d) <= CONFLICT_NEAR_M for d in driving):
             return False
-        h_ego = _end_heading(mut.rmap.edge(route[i]))
-        dh = math.remainder(_end_heading(mut.rmap.lane(lane_id).getEdge()) - h_ego, math.tau)
-        if want == "oncoming":
-            return abs(dh) >= 3 * math.pi / 4
-        # it heads to the ego's left (dh > 0): it comes from the ego's right
-        return math.pi / 4 < abs(dh) < 3 * math.pi / 4 and (dh > 0) == (want == "crossing_right")
+        return _comes_from(mut, route, option, want)
 
     # where the ego enters on yellow, a lawful car on the cross road waits at its red: one that runs it meets the ego
     # (at the ego's red the reference ADS waits, and enters at green: a red runner then met it at green)
@@ -440,6 +444,29 @@ def _crossing(mut, sc, rng, want: str, col: str, at: float | None = None):
         if near is not None:
             return near
     return cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=col == "signal/amber", whole=True)
+
+
+def _comes_from(mut, route, option, want: str) -> bool:
+    """Whether a conflict of :meth:`Mutator._conflicts` comes from the approach ``want`` (``crossing_left``,
+    ``crossing_right``, ``oncoming``) to the ego's way there."""
+    i, _, lane_id = option[:3]
+    h_ego = _end_heading(mut.rmap.edge(route[i]))
+    dh = math.remainder(_end_heading(mut.rmap.lane(lane_id).getEdge()) - h_ego, math.tau)
+    if want == "oncoming":
+        return abs(dh) >= 3 * math.pi / 4
+    # it heads to the ego's left (dh > 0): it comes from the ego's right
+    return math.pi / 4 < abs(dh) < 3 * math.pi / 4 and (dh > 0) == (want == "crossing_right")
+
+
+def _late_change(mut, sc, rng, want: str):
+    """A car that crosses the ego's way from ``want`` at the junction at the end of its start edge, through its path
+    just ahead of it (:data:`LATE_CHANGE_CLEARS_S`), running its red where no lawful car can come: on a mission
+    whose ego starts late on a lane that does not lead on (:data:`LATE_CHANGE_ROOM_M`), it meets the ego in its lane
+    change. (A car timed to a change the route makes at the middle of a long edge met the ego 4 s or more after it:
+    none of 20 such draws on town met it in the change.)"""
+    route = mut._route(sc)
+    return cat.crossing_traffic(mut, sc, rng, keep=lambda o: o[0] == 0 and _comes_from(mut, route, o, want),
+                                runs_red=None, whole=True, clears=LATE_CHANGE_CLEARS_S)
 
 
 def _end_heading(edge) -> float:

@@ -126,7 +126,8 @@ SHIFTED_START = "the ego starts on"
 START_SHIFT_ROOM_M = 60.0
 
 
-def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random) -> tuple[Scenario, str] | None:
+def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random,
+                  room: tuple[float, float] | None = None) -> tuple[Scenario, str] | None:
     """(``sc`` with the ego starting on another lane of its start edge, from which its route makes it change
     lanes on that edge; what was done), None where no such lane will do. The route, start position and goal stay:
     the ego starts on a lane that does not lead on (a car parked on the left of a one-way street, a driver who
@@ -134,12 +135,16 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random) -> tuple[Scena
     may use it and change from it to a lane that leads on without crossing a solid line, with
     :data:`START_SHIFT_ROOM_M` to the edge's end, the start speed within its limit, and no actor's start within
     the separation of the ego's new one. On a route whose lanes lead on everywhere (every seed of the
-    intersection), it is what makes an ADS that changes lanes only where its route needs it change lanes at all."""
+    intersection), it is what makes an ADS that changes lanes only where its route needs it change lanes at all.
+    With ``room`` [m] (a range), the ego also starts that far before the edge's end, where there is so much room:
+    it changes lanes late, a few seconds before the junction (:func:`late_change`)."""
     rmap, m = mut.rmap, sc.mission
     start = rmap.lane(m.start_lane)
     edge = start.getEdge()
-    if edge.getLength() - m.start_pos < START_SHIFT_ROOM_M:
+    if edge.getLength() - m.start_pos < (room[1] if room else START_SHIFT_ROOM_M):
         return None
+    if room:
+        m = m.model_copy(update={"start_pos": round(edge.getLength() - rng.uniform(*room), 2)})
     sep = mut.cfg.min_separation + EGO_LENGTH / 2
     options = []
     for lane in edge.getLanes():
@@ -147,6 +152,9 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random) -> tuple[Scena
         if lane_id == m.start_lane or not lane.allows(PASSENGER) or m.start_speed > lane.getSpeed():
             continue
         new = sc.model_copy(update={"mission": m.model_copy(update={"start_lane": lane_id})})
+        if room and any(a.start_lane.rsplit("_", 1)[0] == edge.getID() and a.start_pos < m.start_pos + 5.0
+                        and a.start_pos > sc.mission.start_pos - 5.0 for a in sc.actors):
+            continue  # (an actor the seed placed between the old start and the new one is left behind)
         at = mut.lane_change_at(new, 0)
         to = mut.ego_lane_at(new, 0, edge.getLength())
         if at is None or not rmap.may_change_to(lane_id, to):
@@ -159,7 +167,17 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random) -> tuple[Scena
     if not options:
         return None
     new, lane_id = rng.choice(options)
-    return new, f"{SHIFTED_START} {lane_id} (was {m.start_lane}): its route makes it change lanes"
+    late = f", {m.start_pos:.0f} m on (was {sc.mission.start_pos:.0f} m)" if room else ""
+    return new, f"{SHIFTED_START} {lane_id}{late} (was {sc.mission.start_lane}): its route makes it change lanes"
+
+
+#: [m] before its start edge's end that the ego starts for a lane change late (``aim._late_change``): the reference
+#: ADS crosses the lane line some 45 % of the way on, 35-40 m and 3-4 s before it reaches the junction
+LATE_CHANGE_ROOM_M = (30.0, 40.0)
+#: [s] before the ego that a car crossing after its late lane change passes the conflict point: in the ego's path
+#: ahead (a time to collision under 3 s) within 3 s of the ego's change
+LATE_CHANGE_CLEARS_S = (0.8, 2.2)
+
 
 
 #: link states (SUMO's) through which a car entering at speed need not be able to stop: major, or uncontrolled

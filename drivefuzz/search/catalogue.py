@@ -221,7 +221,8 @@ def walker_crosses(mut, sc, rng, early=(0.0, 4.0), at: float | None = None):
     return [a], [], {}, f"{a.id} crosses at {spot.lane} @ {spot.pos:.1f} m, leaving at {depart} s"
 
 
-def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool | None = False, whole: bool = False):
+def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool | None = False, whole: bool = False,
+                     clears: tuple[float, float] | None = None):
     """A lawful vehicle on another approach to a junction of the ego's route, timed to reach the conflict
     point with the ego: whoever must yield has to (straight crossing paths, left turn across path). With
     ``keep``, only the conflicts (``Mutator._conflicts``' tuples) it accepts (:mod:`drivefuzz.search.aim`).
@@ -246,7 +247,9 @@ def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool | None = False, who
     if runs_red is None:  # where no car can come lawfully, one that runs its red
         runs_red = not free
     i, s_c, lane_id, dest, d_c, node, _, _ = rng.choice(free or options)
-    t_meet = mut._ego_eta(sc, s_c) + (rng.uniform(0.2, 1.5) if runs_red else rng.uniform(-1.0, 1.5))
+    # (with ``clears`` [s], a range: that long before the ego, through its path ahead of it)
+    t_meet = mut._ego_eta(sc, s_c) + (-rng.uniform(*clears) if clears else rng.uniform(0.2, 1.5) if runs_red
+                                      else rng.uniform(-1.0, 1.5))
     speed = round(lane_limit(mut, lane_id) * rng.uniform(0.6, 1.0), 2)
     lane_len = mut.rmap.lane(lane_id).getLength()
     back = speed * max(t_meet, 0.5) - d_c
