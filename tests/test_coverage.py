@@ -27,6 +27,7 @@ from drivefuzz.triage.coverage import (
     PROJECTIONS,
     classify,
     close_encounters,
+    crossing_sides,
     execution_cells,
     format_coverage,
     link_turn,
@@ -183,6 +184,26 @@ def test_reachable_cells_follow_the_network_and_the_routes(offered):
     for net, cells in offered.items():
         assert {split(c)[0] for c in cells} == set(PROJECTIONS), net
         assert {f"speed-condition:10-30 km/h|{c}" for c in CONDITIONS} <= cells, net
+
+
+def test_crossing_cars_are_offered_from_the_sides_whose_paths_meet_the_ego_s(offered):
+    """A crossing car is offered from a side where a road enters across from that side and a path through the junction
+    out of it comes within CONFLICT_M of the ego's: onto a roundabout the ring comes from the left only; on the ring
+    and on the way out, the road in comes from the right. (Until the nineteenth session both sides, wherever a road
+    entered across: a car from the left in the turn out of the ring was offered, never reached in 25 campaigns.)"""
+    roundabout = load_roadmap(ROOT / "networks" / "roundabout.net.xml")
+    assert crossing_sides(roundabout, "Nin", "ringNW") == {"vehicle/crossing_left"}
+    assert crossing_sides(roundabout, "ringEN", "ringNW") == {"vehicle/crossing_right"}
+    assert crossing_sides(roundabout, "ringEN", "Nout") == {"vehicle/crossing_right"}
+    intersection = load_roadmap(ROOT / "networks" / "intersection.net.xml")
+    assert crossing_sides(intersection, "SC", "CN") == {"vehicle/crossing_left", "vehicle/crossing_right"}
+    rb = offered["roundabout"]
+    assert "party-manoeuvre:vehicle/crossing_left|turn_right" not in rb and "party-element:vehicle/crossing_right|yield" \
+        not in rb
+    # met in the ring's junction as the ego enters: the roundabout, from the way onto it
+    assert {"party-manoeuvre:vehicle/crossing_left|roundabout", "party-element:vehicle/crossing_left|roundabout",
+            "party-manoeuvre:vehicle/crossing_right|turn_right", "party-element:vehicle/crossing_left|yield"} <= rb
+    assert "party-element:vehicle/crossing_right|priority" not in offered["town"]
 
 
 def test_a_turn_is_where_the_road_bends_as_far_as_the_manoeuvre_counts_one():

@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import numpy as np
+from shapely.geometry import LineString
 
 from drivefuzz.search.episodes import GAP_M, PET_S, TTC_S  # the thresholds of a close encounter
 from drivefuzz.sim.world import sun_glare
@@ -317,10 +318,11 @@ def reachable_places(rmap, scenarios: Iterable) -> dict[str, frozenset[str]]:
 
     Per *place* of a route (an edge, and the junction at its end with the link the route takes): its element,
     its turn, and the parties that can meet the ego there (sides only on a multi-lane edge, oncoming only with
-    a road the other way, crossing vehicles only where a road enters that junction across, walkers only with a
-    pavement or a crossing there). A party x element or party x turn cell is offered only where one place has
+    a road the other way, crossing vehicles only from a side whose paths meet the ego's (:func:`crossing_sides`),
+    walkers only with a pavement or a crossing there). A party x element or party x turn cell is offered only where one place has
     both; the manoeuvres that happen anywhere (cruise, accelerate, brake, stop and go) take every party of the
-    route; a lane change, the parties of its multi-lane edges and their junctions."""
+    route (cruise and accelerate not those met only on a ring or a ramp, where they are the roundabout and the
+    merge); a lane change, the parties of its multi-lane edges and their junctions."""
     places = _route_places(rmap, scenarios)
     if not places:
         return {}
@@ -332,9 +334,12 @@ def reachable_places(rmap, scenarios: Iterable) -> dict[str, frozenset[str]]:
             at.add(node)
 
     anywhere = set().union(*(p["parties"] for p in places))
+    # on a ring (its junctions too) or a ramp a cruise or an acceleration is the roundabout or the merge
+    off = set().union(*(p["parties"] for p in places if p["element"] not in ("roundabout", "ramp")))
     for p in anywhere:
         for m in ("cruise", "accelerate", "brake", "stop_go"):
-            offer(f"party-manoeuvre:{p}|{m}")
+            if p in off or m in ("brake", "stop_go"):
+                offer(f"party-manoeuvre:{p}|{m}")
     for pl in places:
         parties = pl["parties"]
         roadside = {p for p in parties if not p.startswith("vehicle/crossing")}  # crossing traffic meets at junctions
@@ -390,13 +395,12 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
             lanes = edge.getLanes()
             drive = [ln for ln in lanes if ln.allows("passenger")]
             node = edge.getToNode()
-            link: dict[str, Any] = {"elements": set(), "turns": set(), "crossing": False}
+            link: dict[str, Any] = {"elements": set(), "turns": set(), "crossing": set()}
             if nxt:
                 _link_features(rmap, edge, rmap.edge(nxt), node, link)
             parties = {"vehicle/ahead", "vehicle/behind", "none/grip"} | _road_parties(edge)
             multilane = len(drive) >= 2
-            if link["crossing"]:
-                parties |= {"vehicle/crossing_left", "vehicle/crossing_right"}
+            parties |= link["crossing"]
             sidewalk = any(ln.allows("pedestrian") and not ln.allows("passenger") for ln in lanes)
             if node.getID() in _crossing_nodes(rmap):
                 parties |= {f"pedestrian/{a}" for a in PEDESTRIAN_APPROACHES}
@@ -405,11 +409,13 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
             base = {"multilane": multilane, "vmax": vmax, "parties": parties, "node": node.getID()}
             if before in feats["ring_edges"] and eid not in feats["ring_edges"]:  # off the ring: the turn out of
                 out_turn = link_turn(rmap, before, eid)  # it counts on this road, with this road's parties and
-                if out_turn:  # the traffic going on round the ring across its way out
-                    exit_node = edge.getFromNode()
-                    ring_on = any(o.getID() in feats["ring_edges"] for o in exit_node.getOutgoing())
-                    out.append(dict(base, element=None, turn=out_turn, node=exit_node.getID(), parties=parties | (
-                        {"vehicle/crossing_left", "vehicle/crossing_right"} if ring_on else set())))
+                if out_turn:  # the traffic that comes across its way out there
+                    out.append(dict(base, element=None, turn=out_turn, node=edge.getFromNode().getID(),
+                                    parties=parties | crossing_sides(rmap, before, eid)))
+            if element is None and node.getID() in feats["ring_nodes"] and nxt in feats["ring_edges"]:
+                # onto the ring: in its junction the ego is on the roundabout, and the ring's traffic crosses it there
+                out.append(dict(base, element="roundabout", turn=None,
+                                parties={"vehicle/ahead", "vehicle/behind", "none/grip"} | link["crossing"]))
             if element:  # a ring or ramp edge: its own element (and the manoeuvre it implies), no turns
                 if not sidewalk:  # nobody walks on a ring or a ramp without a pavement
                     base["parties"] = {p for p in parties if not p.startswith("pedestrian/")}
@@ -465,13 +471,57 @@ def _link_features(rmap, edge, nxt, node, out: dict[str, Any]) -> None:
     turn = link_turn(rmap, edge.getID(), nxt.getID())
     if turn:
         out["turns"].add(turn)
-    # crossing traffic: another road for cars enters the node at 45-135 degrees to the route's (a ramp
-    # merging at a shallow angle comes from the side, not across)
+    out["crossing"] |= crossing_sides(rmap, edge.getID(), nxt.getID())
+
+
+#: [m] two centre lines through a junction closer than this let the bodies on them come within the close-encounter
+#: gap (:data:`GAP_M`, a car's width, and room for both to be off their lines: the reference ADS swung out of a
+#: roundabout's exit to within 0.7 m of a car on the road in beside it, whose centre line is 3.5 m from the exit's)
+CONFLICT_M = 5.0
+
+
+@lru_cache(maxsize=4096)
+def crossing_sides(rmap, edge_id: str, next_id: str) -> frozenset[str]:
+    """``vehicle/crossing_left`` / ``_right``: the sides from which a car can cross the ego's way through the link
+    from ``edge_id`` to ``next_id``. A side counts where a road for cars enters that junction at 45-135 degrees to
+    the route's (a ramp merging at a shallow angle comes from the side, not across) from that side, and a path
+    through the junction out of one of its lanes comes within :data:`CONFLICT_M` of one of the ego's (crosses it,
+    or merges into the road it takes). Until the nineteenth session both sides counted wherever any road entered
+    across: the way onto a roundabout (its ring comes from the left) offered cars crossing from the right, and the
+    turn out of it cars from the left."""
+    def line(frm: str, to: str, via: str) -> LineString:  # the last and the first 15 m of the lanes, and between
+        f, g = rmap.geom(frm), rmap.geom(to)
+        pts = [f.position(max(f.length - 15.0, 0.0))[:2]] + list(f.pts[f.cum > f.length - 15.0])
+        pts += [p for lid in rmap.internal_chain(via) for p in rmap.geom(lid).pts]
+        pts += [p for p in g.pts[g.cum < 15.0]] + [g.position(min(15.0, g.length))[:2]]
+        return LineString([tuple(map(float, p[:2])) for p in pts])
+
+    edge = rmap.edge(edge_id)
+    node = edge.getToNode()
+    ego = [line(*c) for c in rmap.connections(edge_id, next_id)]
     h = _end_heading(edge)
+    out = set()
     for e in node.getIncoming():
-        if e.getID() != edge.getID() and rmap.is_normal_edge(e) and e.allows("passenger"):
-            if math.pi / 4 < abs(wrap_angle(_end_heading(e) - h)) < 3 * math.pi / 4:
-                out["crossing"] = True
+        if e.getID() == edge_id or not rmap.is_normal_edge(e) or not e.allows("passenger"):
+            continue
+        dh = wrap_angle(_end_heading(e) - h)
+        side = "vehicle/crossing_right" if dh > 0 else "vehicle/crossing_left"  # heads to the ego's left: from its right
+        if side in out or not math.pi / 4 < abs(dh) < 3 * math.pi / 4:
+            continue
+        for lane in e.getLanes():
+            if not lane.allows("passenger"):
+                continue
+            for c in lane.getOutgoing():
+                to = c.getToLane()
+                if not rmap.is_normal_edge(to.getEdge()) or to.getEdge().getToNode() is e.getFromNode():
+                    continue
+                theirs = line(lane.getID(), to.getID(), c.getViaLaneID() or "")
+                if any(theirs.distance(mine) < CONFLICT_M for mine in ego):
+                    out.add(side)
+                    break
+            if side in out:
+                break
+    return frozenset(out)
 
 
 @lru_cache(maxsize=4096)
