@@ -864,3 +864,30 @@ def test_a_crossing_car_aimed_at_a_lane_change_meets_the_ego_as_it_changes_late_
                if who == a.id]
         hits += any(e.party == "vehicle/crossing_left" and e.manoeuvre == "lane_change" for e in met)
     assert late >= 3 and hits >= 1, (late, hits)  # (the draws k = 0-7: 3 late, 1 met in the change)
+
+
+def test_an_oncoming_car_aimed_at_a_turn_comes_into_the_road_the_ego_turns_into_and_meets_it_there(town_seeds):
+    """Aimed at an oncoming car during a right turn, the crossing builder (one of the two; the other is a car on the
+    road the other way) times a car from the opposite approach that turns into the road the ego turns into, beside
+    it, without yielding to it: its path comes within a lane and a half of the ego's and crosses it nowhere, so the
+    conflicts the crossing builders time cars to (paths within 2 m) had none. (`python tools/lab_aim.py --network
+    town --cells "oncoming|turn_right"`: 0 of 15 reached, now 3; the intersection 0 of 12, now 2.)"""
+    from drivefuzz.search.aim import aimed
+
+    sc = town_seeds[7]  # D2C2, a right turn at C2
+    mut = _paced(sc)
+    route = mut._route(sc)
+    built, hits = 0, 0
+    for k in range(6):
+        m, _ = aimed(mut, sc, "party-manoeuvre:vehicle/oncoming|turn_right", random.Random(k))
+        new = m.scenario.actors[len(sc.actors):]
+        if len(new) != 1 or new[0].nav is not NavType.LINEAR:  # not built, or the car on the road the other way
+            continue
+        (a,) = new
+        built += 1
+        assert a.dest_edge in route[1:] and mut.rmap.lane(a.start_lane).getEdge().getID() not in route
+        ex = run(m.scenario)
+        met = [classify(m.scenario, ex.trace, mut.rmap, who, f) for who, f in close_encounters(risk_score(ex.trace))
+               if who == a.id]
+        hits += any(e.party == "vehicle/oncoming" and e.manoeuvre == "turn_right" for e in met)
+    assert built >= 2 and hits >= 1, (built, hits)  # (k = 0-5: 4 built, 4 met in the turn)

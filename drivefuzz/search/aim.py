@@ -91,6 +91,8 @@ MOVING_START_AHEAD = ("lead_brakes", "brake_check", "lead_slower", "slow_ahead")
 #: [m] from a place where the ego accelerates, brakes or cruises (its profile's, every 5 m) that a conflict point of a
 #: crossing car aimed at that manoeuvre lies
 CONFLICT_NEAR_M = 5.0
+#: [m] how close an oncoming car's path into the road the ego turns into comes to the ego's (a lane and a half)
+TURN_BESIDE_M = 5.0
 #: share of the aims at a crossing car in a lane change that start the ego late on a lane that does not lead on
 LATE_CHANGE_SHARE = 0.7
 #: [m] past a lane change's place where an oncoming car is level with the ego
@@ -443,6 +445,12 @@ def _crossing(mut, sc, rng, want: str, col: str, at: float | None = None):
         near = cat.crossing_traffic(mut, sc, rng, keep=partial(keep, near=True), runs_red=None, whole=True)
         if near is not None:
             return near
+    if want == "oncoming" and col in ("turn_left", "turn_right"):
+        # a car from the other way into the road the ego turns into, beside it there (a left turner that does not
+        # yield to the ego's right turn): its path comes within a lane of the ego's, crossing it nowhere
+        beside = cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=True, whole=True, zone=TURN_BESIDE_M)
+        if beside is not None:
+            return beside
     return cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=col == "signal/amber", whole=True)
 
 

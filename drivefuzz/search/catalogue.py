@@ -222,7 +222,7 @@ def walker_crosses(mut, sc, rng, early=(0.0, 4.0), at: float | None = None):
 
 
 def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool | None = False, whole: bool = False,
-                     clears: tuple[float, float] | None = None):
+                     clears: tuple[float, float] | None = None, zone: float = 2.0):
     """A lawful vehicle on another approach to a junction of the ego's route, timed to reach the conflict
     point with the ego: whoever must yield has to (straight crossing paths, left turn across path). With
     ``keep``, only the conflicts (``Mutator._conflicts``' tuples) it accepts (:mod:`drivefuzz.search.aim`).
@@ -234,7 +234,7 @@ def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool | None = False, who
     (a junction reached after some 60 s needs 400 m of road upstream on the cross approach otherwise: walked back
     at random through the junctions before it, such a start was on the ego's own route on town's seed 005, where
     the car waited at a light ahead of the ego and never came to the junction it was timed for)."""
-    options = mut._conflicts(sc, whole=whole)
+    options = mut._conflicts(sc, whole=whole, zone=zone)  # (``zone`` [m]: paths that close, not only crossing)
     if keep is not None:
         options = [o for o in options if keep(o)]
     # where some can, a car whose light lets it through when the ego comes (at a signalised crossing the cross

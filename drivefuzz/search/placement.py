@@ -328,7 +328,8 @@ class RoutePlacement:
         pts.append(self.rmap.geom(to_lane).position(min(15.0, g.length))[:2])
         return LineString(pts)
 
-    def _conflicts(self, sc: Scenario, whole: bool = False) -> list[tuple[int, float, str, str, float, str, str, str]]:
+    def _conflicts(self, sc: Scenario, whole: bool = False,
+                   zone: float = 2.0) -> list[tuple[int, float, str, str, float, str, str, str]]:
         """Ways to cross the ego's path at the junctions of its route within ``conflict_range`` (along all of it
         with ``whole``: an aim at a junction's cell; on town seed 000's priority junction B3 lies 289 m on):
         (route index of the junction's incoming edge, ego distance [m] from its start to the conflict point,
@@ -336,7 +337,7 @@ class RoutePlacement:
         the conflict point, junction id, the ego's and the actor's link states: 'M' major, 'm' minor, 's'
         stop, 'w' all-way stop, 'o' signalised...). Cached per mission."""
         m = sc.mission
-        key = (m.start_lane, m.start_pos, m.goal_edge, whole)
+        key = (m.start_lane, m.start_pos, m.goal_edge, whole, zone)
         if key in self._conflict_cache:
             return self._conflict_cache[key]
         rmap, route = self.rmap, self._route(sc)
@@ -353,7 +354,7 @@ class RoutePlacement:
             ego_state = next((c.getState() for c in rmap.lane(fl).getOutgoing() if c.getToLane().getID() == tl), "")
             ego_line = self._passage(fl, tl, via)
             via_len = sum(rmap.geom(lid).length for lid in self._internal_chain(via))
-            ego_zone = ego_line.buffer(2.0)  # closer centre lines than this: the bodies meet
+            ego_zone = ego_line.buffer(zone)  # closer centre lines than this (2 m): the bodies meet
             node = rmap.edge(e).getToNode()
             for inc in node.getIncoming():
                 if inc.getID() == e or inc.getFunction() != "":
