@@ -296,7 +296,7 @@ def test_a_campaign_shares_its_cells_among_its_seed_jobs(town_seeds):
     assert share_cells([["a", "b"], ["b"], ["b", "c"]]) == [["a"], ["b"], ["c"]]
     # a cell goes to a seed whose mission the mutator can aim at it, where one can (before, 54 of the 185 went to
     # one that cannot: a car from the right at a green light to seed 000, whose one light, C2, has none that its
-    # green lets through when the ego comes)
+    # green lets through when the ego comes; 39 of 184 since the nineteenth session's builders and crossing sides)
     from drivefuzz.campaign.aiming import can_aim
 
     built = share_cells(reaches, lambda i, c: can_aim(rmap, town_seeds[i], c, i))
@@ -304,7 +304,7 @@ def test_a_campaign_shares_its_cells_among_its_seed_jobs(town_seeds):
     stuck = [c for c, i in owner.items() if not can_aim(rmap, town_seeds[i], c, i)]
     assert all(not can_aim(rmap, town_seeds[i], c, i) for c in stuck for i, r in enumerate(reaches) if c in r)
     assert len(stuck) <= 15 and sum(not can_aim(rmap, town_seeds[i], c, i) for c, i in
-                                    {c: i for i, cells in enumerate(shares) for c in cells}.items()) >= 40
+                                    {c: i for i, cells in enumerate(shares) for c in cells}.items()) >= 35
     cell = "party-element:vehicle/crossing_right|signal/green"
     assert not can_aim(rmap, town_seeds[0], cell, 0) and cell in shares[0] and cell in built[4]
     assert can_aim(rmap, town_seeds[4], cell, 4)
