@@ -471,7 +471,7 @@ def _late_change(mut, sc, rng, want: str):
     just ahead of it (:data:`LATE_CHANGE_CLEARS_S`), running its red where no lawful car can come: on a mission
     whose ego starts late on a lane that does not lead on (:data:`LATE_CHANGE_ROOM_M`), it meets the ego in its lane
     change. (A car timed to a change the route makes at the middle of a long edge met the ego 4 s or more after it:
-    none of 20 such draws on town met it in the change.)"""
+    none of 24 such draws on town met it in the change.)"""
     route = mut._route(sc)
     return cat.crossing_traffic(mut, sc, rng, keep=lambda o: o[0] == 0 and _comes_from(mut, route, o, want),
                                 runs_red=None, whole=True, clears=LATE_CHANGE_CLEARS_S)

@@ -137,7 +137,7 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random,
     the separation of the ego's new one. On a route whose lanes lead on everywhere (every seed of the
     intersection), it is what makes an ADS that changes lanes only where its route needs it change lanes at all.
     With ``room`` [m] (a range), the ego also starts that far before the edge's end, where there is so much room:
-    it changes lanes late, a few seconds before the junction (:func:`late_change`)."""
+    it changes lanes late, a few seconds before the junction (``aim._late_change``)."""
     rmap, m = mut.rmap, sc.mission
     start = rmap.lane(m.start_lane)
     edge = start.getEdge()
@@ -172,12 +172,12 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random,
 
 
 #: [m] before its start edge's end that the ego starts for a lane change late (``aim._late_change``): the reference
-#: ADS crosses the lane line some 45 % of the way on, 35-40 m and 3-4 s before it reaches the junction
+#: ADS crosses the lane line 45 % of the way from 8 m behind its start to the edge's end, here 20-27 m before the
+#: stop line (from 60 m, as a start on another lane needs, some 40 m: 4-6 s before the junction on town)
 LATE_CHANGE_ROOM_M = (30.0, 40.0)
 #: [s] before the ego that a car crossing after its late lane change passes the conflict point: in the ego's path
 #: ahead (a time to collision under 3 s) within 3 s of the ego's change
 LATE_CHANGE_CLEARS_S = (0.8, 2.2)
-
 
 
 #: link states (SUMO's) through which a car entering at speed need not be able to stop: major, or uncontrolled
