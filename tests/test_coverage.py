@@ -190,7 +190,8 @@ def test_crossing_cars_are_offered_from_the_sides_whose_paths_meet_the_ego_s(off
     """A crossing car is offered from a side where a road enters across from that side and a path through the junction
     out of it comes within CONFLICT_M of the ego's: onto a roundabout the ring comes from the left only; on the ring
     and on the way out, the road in comes from the right. (Until the nineteenth session both sides, wherever a road
-    entered across: a car from the left in the turn out of the ring was offered, never reached in 25 campaigns.)"""
+    entered across: a car from the left in the turn out of the ring was offered, and no campaign read by the present
+    classifier reached it.)"""
     roundabout = load_roadmap(ROOT / "networks" / "roundabout.net.xml")
     assert crossing_sides(roundabout, "Nin", "ringNW") == {"vehicle/crossing_left"}
     assert crossing_sides(roundabout, "ringEN", "ringNW") == {"vehicle/crossing_right"}
