@@ -489,6 +489,7 @@ def crossing_sides(rmap, edge_id: str, next_id: str) -> frozenset[str]:
     or merges into the road it takes). Until the nineteenth session both sides counted wherever any road entered
     across: the way onto a roundabout (its ring comes from the left) offered cars crossing from the right, and the
     turn out of it cars from the left."""
+
     def line(frm: str, to: str, via: str) -> LineString:  # the last and the first 15 m of the lanes, and between
         f, g = rmap.geom(frm), rmap.geom(to)
         pts = [f.position(max(f.length - 15.0, 0.0))[:2]] + list(f.pts[f.cum > f.length - 15.0])
