@@ -145,6 +145,9 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random,
         return None
     if room:
         m = m.model_copy(update={"start_pos": round(edge.getLength() - rng.uniform(*room), 2)})
+        if any(rmap.lane(a.start_lane).getEdge().getID() == edge.getID()
+               and sc.mission.start_pos - 5.0 < a.start_pos < m.start_pos + 5.0 for a in sc.actors):
+            return None  # an actor the seed placed between the old start and the new one would be left behind
     sep = mut.cfg.min_separation + EGO_LENGTH / 2
     options = []
     for lane in edge.getLanes():
@@ -152,9 +155,6 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random,
         if lane_id == m.start_lane or not lane.allows(PASSENGER) or m.start_speed > lane.getSpeed():
             continue
         new = sc.model_copy(update={"mission": m.model_copy(update={"start_lane": lane_id})})
-        if room and any(a.start_lane.rsplit("_", 1)[0] == edge.getID() and a.start_pos < m.start_pos + 5.0
-                        and a.start_pos > sc.mission.start_pos - 5.0 for a in sc.actors):
-            continue  # (an actor the seed placed between the old start and the new one is left behind)
         at = mut.lane_change_at(new, 0)
         to = mut.ego_lane_at(new, 0, edge.getLength())
         if at is None or not rmap.may_change_to(lane_id, to):

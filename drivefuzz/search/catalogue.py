@@ -247,9 +247,11 @@ def crossing_traffic(mut, sc, rng, keep=None, runs_red: bool | None = False, who
     if runs_red is None:  # where no car can come lawfully, one that runs its red
         runs_red = not free
     i, s_c, lane_id, dest, d_c, node, _, _ = rng.choice(free or options)
-    # (with ``clears`` [s], a range: that long before the ego, through its path ahead of it)
-    t_meet = mut._ego_eta(sc, s_c) + (-rng.uniform(*clears) if clears else rng.uniform(0.2, 1.5) if runs_red
-                                      else rng.uniform(-1.0, 1.5))
+    if clears:  # that long before the ego, through its path ahead of it
+        lead = -rng.uniform(*clears)
+    else:
+        lead = rng.uniform(0.2, 1.5) if runs_red else rng.uniform(-1.0, 1.5)
+    t_meet = mut._ego_eta(sc, s_c) + lead
     speed = round(lane_limit(mut, lane_id) * rng.uniform(0.6, 1.0), 2)
     lane_len = mut.rmap.lane(lane_id).getLength()
     back = speed * max(t_meet, 0.5) - d_c
