@@ -133,6 +133,30 @@ def test_a_light_shifted_for_amber_is_yellow_as_the_ego_comes_to_it(mut, town_se
     assert seen >= 2
 
 
+def test_a_light_shifted_for_amber_is_yellow_as_the_ego_comes_to_it_timed_by_a_run_that_waited_there(town_seeds):
+    """Timed by the seed's own run (as a fuzz job times it), which stands at its second light (B2) short of the
+    line: that run took its whole wait over those metres, and the shift timed to them turned the light yellow after
+    the ego had passed on green (0 of 4 draws; interchange seed 007: 28 s late, 0 of 4)."""
+    from drivefuzz.campaign.job import TRAVEL_EVERY_S, ego_travel
+    from drivefuzz.search.aim_place import _lights
+
+    sc = town_seeds[5]
+    mut = Mutator(load_roadmap(sc.network_path()))
+    mut.observe(sc, ego_travel(execute(sc).trace), TRAVEL_EVERY_S)
+    at, tls, _ = _lights(mut, sc)[1]
+    assert tls == "B2"
+    route, d = mut._route(sc), -sc.mission.start_pos
+    edge = next(e for e in route if abs((d := d + mut.rmap.edge(e).getLength()) - at) < 1.0)
+    amber = 0
+    for k in range(4):
+        new, desc = shift_light(mut, sc, at, "signal/amber", random.Random(k))
+        trace = execute(new).trace
+        near = [i for i, ln in enumerate(str(x) for x in trace["lane"])
+                if ln.startswith(edge + "_") and float(trace["tls_dist"][i]) < 30.0]
+        amber += any(str(trace["tls_state"][i])[:1] in "yY" for i in near)
+    assert amber >= 3, amber
+
+
 def test_a_light_shifted_for_green_lets_the_ego_arrive_on_green_without_stopping(mut, town_seeds):
     """Coverage reads the phase at arrival (the state when the ego came to rest at the light): seed 006 stands at
     its light at C0 in its own run, so its green cells need the shift; on every seed with a light the ego then

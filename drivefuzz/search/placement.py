@@ -147,8 +147,8 @@ class RoutePlacement:
         seen = self._observed.get(_pace_key(m))
         s_route, t = self._model_profile(sc)
         if seen is not None and sc.signals:  # the run's pace, plus what the shifted lights change in the model
-            _, plain = self._model_profile(sc.model_copy(update={"signals": ()}))
-            t = _observed_times(plain, *seen) + (t - plain)
+            _, plain, waits = self._model_profile(sc.model_copy(update={"signals": ()}), waits=True)
+            t = _waits_at_lines(_observed_times(plain, *seen), waits) + (t - plain)
         elif seen is not None:
             t = _observed_times(t, *seen)
         self._profile_cache[key] = (s_route, t)
@@ -163,7 +163,9 @@ class RoutePlacement:
         self._observed[key] = (np.asarray(travelled, dtype=float), every)
         self._profile_cache = {}
 
-    def _model_profile(self, sc: Scenario) -> tuple[np.ndarray, np.ndarray]:
+    def _model_profile(self, sc: Scenario, waits: bool = False):
+        """(the route distance [m] of each step, its time [s]) of the empty-road model (:meth:`_ego_profile`); with
+        ``waits``, also {step index of a stop line: [s] waited there} of the lights it stops at."""
         m = sc.mission
         cfg, rmap, route = self.cfg, self.rmap, self._route(sc)
         caps: list[np.ndarray] = []
@@ -208,7 +210,7 @@ class RoutePlacement:
                 stops[j] = self._red_wait(t, j, partial(signal_state, str(rmap.path), tls, link,
                                                         shift=shifts.get(tls, 0.0)), stopping=True) or 0.0
                 t = self._profile_times(cap, m.start_speed, stops)
-        return s_route, t
+        return (s_route, t, stops) if waits else (s_route, t)
 
     @staticmethod
     def _red_wait(t: np.ndarray, j: int, state, stopping: bool = False) -> float | None:
@@ -446,6 +448,32 @@ def _pace_key(m) -> tuple:
     :func:`drivefuzz.search.aim_place.shifted_start`, drives the route at the pace of its seed: timed by the model
     instead, its lineage lost the ADS's own pace), with its start speed (one that enters moving does not)."""
     return m.start_edge, m.start_pos, m.goal_edge, m.start_speed
+
+
+#: [m] before a stop line where the model waits that a standstill of the ADS's run is its wait at that light (a queue
+#: ahead of it, or its front short of the line: coverage.ARRIVAL_M)
+LINE_WAIT_M = 30.0
+#: [s] a run's time over one metre above which it stood there
+STOOD_S = 1.0
+
+
+def _waits_at_lines(t_run: np.ndarray, waits: dict[int, float]) -> np.ndarray:
+    """The times ``t_run`` of a run's profile (:func:`_observed_times`) with its wait at each light where the model
+    waits (``waits``: step of the stop line -> [s]) moved to the line. The run stands its front a metre or two short
+    of the line (1.5 m at interchange's tN), the model at it: the metres between took the whole wait, and everything
+    timed there with the light shifted (the ego's arrival at a light shifted to turn yellow as it comes, say) was
+    that wait late (interchange seed 007, 28 s: the light turned yellow long after the ego had passed on green)."""
+    out = t_run.copy()
+    for j, wait in waits.items():
+        lo = max(j - int(LINE_WAIT_M), 2)
+        if wait <= 0.0 or j - lo < 1 or j >= len(out):
+            continue
+        per_m = np.diff(out[lo - 1:j])  # [s] per metre over the steps lo..j-1
+        k = int(np.argmax(per_m))
+        stood = float(per_m[k] - per_m[max(k - 1, 0)]) if k > 0 else 0.0
+        if stood > STOOD_S:
+            out[lo + k:j] -= stood
+    return out
 
 
 def _observed_times(t_model: np.ndarray, travelled: np.ndarray, every: float) -> np.ndarray:
