@@ -915,3 +915,24 @@ def test_an_oncoming_car_aimed_at_a_turn_comes_into_the_road_the_ego_turns_into_
                if who == a.id]
         hits += any(e.party == "vehicle/oncoming" and e.manoeuvre == "turn_right" for e in met)
     assert built >= 2 and hits >= 1, (built, hits)  # (k = 0-5: 4 built, 4 met in the turn)
+
+
+def test_a_crossing_car_aimed_at_a_turn_does_not_yield_and_meets_the_ego_in_its_turn(town_seeds):
+    """Aimed at a car from the left during a right turn, the crossing builder times one that does not yield to the
+    turning ego (a lawful one met it as it waited, in stop and go: `python tools/lab_aim.py --network town --cells
+    "vehicle/crossing_left|turn_right"`, 0 of 15 reached, now 5; the interchange's and intersection's vehicle
+    crossing cells of the turns 1 of 38, now 19)."""
+    from drivefuzz.search.aim import aimed
+
+    sc = town_seeds[0]  # a right turn at C2
+    mut = _paced(sc)
+    hits = []
+    for k in range(4):
+        m, _ = aimed(mut, sc, "party-manoeuvre:vehicle/crossing_left|turn_right", random.Random(k))
+        (a,) = m.scenario.actors[len(sc.actors):]
+        assert a.nav is NavType.LINEAR and "running its red" in m.description, m.description
+        ex = run(m.scenario)
+        hits.append(any(e.party == "vehicle/crossing_left" and e.manoeuvre == "turn_right" for e in (
+            classify(m.scenario, ex.trace, mut.rmap, who, f) for who, f in close_encounters(risk_score(ex.trace))
+            if who == a.id)))
+    assert sum(hits) >= 2, hits

@@ -451,7 +451,23 @@ def _crossing(mut, sc, rng, want: str, col: str, at: float | None = None):
         beside = cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=True, whole=True, zone=TURN_BESIDE_M)
         if beside is not None:
             return beside
-    return cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=col == "signal/amber", whole=True)
+    lawful = partial(cat.crossing_traffic, keep=keep, runs_red=col == "signal/amber", whole=True)
+    if want == "oncoming" or col not in ("turn_left", "turn_right"):
+        return lawful(mut, sc, rng)
+
+    def cuts(mut, sc, rng):
+        """A car from that side that does not yield to the turning ego (at the ego's green, or on a major road the
+        ego turns off); where no path crosses the ego's, one that comes into the road it turns into beside it."""
+        for zone in (2.0, TURN_BESIDE_M):
+            built = cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=True, whole=True, zone=zone)
+            if built is not None:
+                return built
+        return None
+
+    # a lawful car met the ego as it waited for it, in stop and go (lab, 3 draws per seed, vehicle crossing cells of
+    # the turns reached: interchange 0 -> 5 of 20, intersection 1 -> 14 of 18, town 15 -> 15 of 54; half and half:
+    # 2, 9, 12); a lawful one where none can be built
+    return cuts(mut, sc, rng) or lawful(mut, sc, rng)
 
 
 def _comes_from(mut, route, option, want: str) -> bool:
