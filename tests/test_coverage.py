@@ -31,6 +31,7 @@ from drivefuzz.triage.coverage import (
     execution_cells,
     format_coverage,
     link_turn,
+    oncoming_into,
     reachable,
     split,
     summarise,
@@ -205,6 +206,19 @@ def test_crossing_cars_are_offered_from_the_sides_whose_paths_meet_the_ego_s(off
     assert {"party-manoeuvre:vehicle/crossing_left|roundabout", "party-element:vehicle/crossing_left|roundabout",
             "party-manoeuvre:vehicle/crossing_right|turn_right", "party-element:vehicle/crossing_left|yield"} <= rb
     assert "party-element:vehicle/crossing_right|priority" not in offered["town"]
+
+
+def test_a_car_the_other_way_is_offered_in_a_turn_only_where_its_way_passes_near_the_ego_s(offered, town_map):
+    """In a turn, a car coming the other way is offered where a lane of the road the other way beside the road the
+    ego turns into, or a path from the opposite approach, comes within CONFLICT_M of the ego's way. The interchange's
+    off-ramp turns right into the near lane of a road with two lanes each way: the lanes the other way pass 6 m off,
+    and no campaign met a car from there in that turn. On town the road turned into has one lane each way."""
+    interchange = load_roadmap(ROOT / "networks" / "interchange.net.xml")
+    assert not oncoming_into(interchange, "WBexit", "NB2")
+    assert oncoming_into(town_map, "D2C2", "C2C3") and oncoming_into(town_map, "D2C2", "C2C1")
+    assert "party-manoeuvre:vehicle/oncoming|turn_right" not in offered["interchange"]
+    assert "party-manoeuvre:vehicle/oncoming|turn_left" in offered["interchange"]
+    assert "party-manoeuvre:vehicle/oncoming|turn_right" in offered["town"]
 
 
 def test_a_turn_is_where_the_road_bends_as_far_as_the_manoeuvre_counts_one():
