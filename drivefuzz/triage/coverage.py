@@ -483,27 +483,33 @@ CONFLICT_M = 5.0
 
 
 @lru_cache(maxsize=4096)
-def _link_lines(rmap, edge_id: str, next_id: str) -> list[LineString]:
+def _link_lines(rmap, edge_id: str, next_id: str) -> tuple[LineString, ...]:
     """The ego's centre lines through the link from ``edge_id`` to ``next_id``: per connection, the last 15 m of its
     lane, the junction's internal lanes, and the first 15 m of the lane it leads into."""
-    return [_line(rmap, *c) for c in rmap.connections(edge_id, next_id)]
+    return tuple(_line(rmap, *c) for c in rmap.connections(edge_id, next_id))
 
 
 def _line(rmap, frm: str, to: str, via: str) -> LineString:
-    f, g = rmap.geom(frm), rmap.geom(to)
-    pts = [f.position(max(f.length - 15.0, 0.0))[:2]] + list(f.pts[f.cum > f.length - 15.0])
-    pts += [p for lid in rmap.internal_chain(via) for p in rmap.geom(lid).pts]
+    g = rmap.geom(to)
+    pts = _tail(rmap, frm) + [p for lid in rmap.internal_chain(via) for p in rmap.geom(lid).pts]
     pts += [p for p in g.pts[g.cum < 15.0]] + [g.position(min(15.0, g.length))[:2]]
     return LineString([tuple(map(float, p[:2])) for p in pts])
 
 
+def _tail(rmap, lane_id: str) -> list:
+    """The points of the last 15 m of ``lane_id``."""
+    f = rmap.geom(lane_id)
+    return [f.position(max(f.length - 15.0, 0.0))[:2]] + list(f.pts[f.cum > f.length - 15.0])
+
+
+@lru_cache(maxsize=4096)
 def oncoming_into(rmap, edge_id: str, next_id: str) -> bool:
     """Whether a car coming the other way can meet the ego as it turns from ``edge_id`` into ``next_id``: the
     road the other way beside ``next_id`` has a lane whose last 15 m come within :data:`CONFLICT_M` of the ego's
     way, or a path through the junction from the opposite approach does (a left turner into the same road). On the
     interchange the ego turns right from the off-ramp into the near lane of a road with two lanes each way: the
-    other way's lanes pass 6 m from it, and none of 35 campaigns met a car from there in that turn (nineteenth
-    session)."""
+    other way's lanes pass 6 m from it, and none of 35 campaigns (seventeenth to nineteenth sessions) met a car
+    from there in that turn."""
     ego = _link_lines(rmap, edge_id, next_id)
     nxt = rmap.edge(next_id)
     for o in nxt.getToNode().getOutgoing():
@@ -511,13 +517,13 @@ def oncoming_into(rmap, edge_id: str, next_id: str) -> bool:
             continue
         for lane in o.getLanes():
             if lane.allows("passenger"):
-                g = rmap.geom(lane.getID())
-                pts = [g.position(max(g.length - 15.0, 0.0))[:2]] + list(g.pts[g.cum > g.length - 15.0])
-                if any(LineString([tuple(map(float, p[:2])) for p in pts]).distance(m) < CONFLICT_M for m in ego):
+                end = LineString([tuple(map(float, p[:2])) for p in _tail(rmap, lane.getID())])
+                if any(end.distance(m) < CONFLICT_M for m in ego):
                     return True
-    return "vehicle/oncoming" in _approaches_near(rmap, edge_id, next_id, ego)
+    return "vehicle/oncoming" in _approaches_near(rmap, edge_id, next_id)
 
 
+@lru_cache(maxsize=4096)
 def crossing_sides(rmap, edge_id: str, next_id: str) -> frozenset[str]:
     """``vehicle/crossing_left`` / ``_right``: the sides from which a car can cross the ego's way through the link
     from ``edge_id`` to ``next_id``. A side counts where a road for cars enters that junction at 45-135 degrees to
@@ -529,14 +535,14 @@ def crossing_sides(rmap, edge_id: str, next_id: str) -> frozenset[str]:
     return _approaches_near(rmap, edge_id, next_id) - {"vehicle/oncoming"}
 
 
-def _approaches_near(rmap, edge_id: str, next_id: str, ego: list[LineString] | None = None) -> frozenset[str]:
+def _approaches_near(rmap, edge_id: str, next_id: str) -> frozenset[str]:
     """The approaches (``vehicle/crossing_left``, ``_right``, ``vehicle/oncoming``) to the junction at the end of
     ``edge_id`` from which a path through it comes within :data:`CONFLICT_M` of one of the ego's to ``next_id``
-    (``ego``, :func:`_link_lines`): a road for cars that enters at 45-135 degrees to the route's from that side, or
+    (:func:`_link_lines`): a road for cars that enters at 45-135 degrees to the route's from that side, or
     at more than 135 degrees (the other way)."""
     edge = rmap.edge(edge_id)
     node = edge.getToNode()
-    ego = _link_lines(rmap, edge_id, next_id) if ego is None else ego
+    ego = _link_lines(rmap, edge_id, next_id)
     h = _end_heading(edge)
     out = set()
     for e in node.getIncoming():
