@@ -936,3 +936,33 @@ def test_a_crossing_car_aimed_at_a_turn_does_not_yield_and_meets_the_ego_in_its_
             classify(m.scenario, ex.trace, mut.rmap, who, f) for who, f in close_encounters(risk_score(ex.trace))
             if who == a.id)))
     assert sum(hits) >= 2, hits
+
+
+def test_a_crossing_car_aimed_at_an_acceleration_meets_the_ego_as_it_pulls_away_before_its_junction():
+    """Aimed at a car from the left while the ego accelerates, most draws start the ego standing 12-22 m before its
+    first junction (its light turned green as it comes) and time a car across its way there, clearing it just ahead:
+    the ego meets it still speeding up. On the interchange's off-ramp the ego's profile speeds up only on the ramp
+    (a merge) or after its turn: `python tools/lab_aim.py --network interchange --cells "vehicle/crossing_left|
+    accelerate" --draws 4`, 0 of 16 reached before, 3 now (seed 007: 4 of its 8 standing starts here)."""
+    from pathlib import Path
+
+    from drivefuzz.scenario.seed import list_seeds
+    from drivefuzz.scenario.sumofiles import read_scenario
+    from drivefuzz.search.aim import aimed
+    from drivefuzz.search.aim_place import STANDING_CROSS_ROOM_M
+
+    sc = read_scenario(list_seeds(Path(__file__).resolve().parent.parent / "seeds" / "interchange")[7])
+    mut = _paced(sc)
+    end = mut.rmap.edge(sc.mission.start_edge).getLength()
+    standing, hits = 0, 0
+    for k in range(8):
+        m, _ = aimed(mut, sc, "party-manoeuvre:vehicle/crossing_left|accelerate", random.Random(k))
+        new = m.scenario.mission
+        if "starts standing" not in m.description:
+            continue
+        standing += 1
+        assert new.start_speed == 0.0 and STANDING_CROSS_ROOM_M[0] <= end - new.start_pos <= STANDING_CROSS_ROOM_M[1]
+        ex = run(m.scenario)
+        hits += any(e.party == "vehicle/crossing_left" and e.manoeuvre == "accelerate" for e in (
+            classify(m.scenario, ex.trace, mut.rmap, who, f) for who, f in close_encounters(risk_score(ex.trace))))
+    assert standing >= 6 and hits >= 3, (standing, hits)  # (k = 0-7: 8 standing, 4 met accelerating)

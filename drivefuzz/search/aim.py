@@ -53,10 +53,11 @@ from drivefuzz.search.catalogue import Situation, add_situation
 from drivefuzz.search.fairness import lane_limit
 from drivefuzz.search.aim_place import (FOLLOW_TURN_CLOSE_S, GRIP_ACCEL_LENGTH_M, GRIP_START_BEHIND_M,
                                         GRIP_START_LENGTH_M, GRIP_START_MU, JUNCTION_COLUMNS,
-                                        LATE_CHANGE_CLEARS_S, LATE_CHANGE_ROOM_M, START_SPOTS_M,
+                                        LATE_CHANGE_CLEARS_S, LATE_CHANGE_ROOM_M, STANDING_CROSS_ROOM_M,
+                                        START_SPOTS_M,
                                         drawn_level, follower_at, grip_at, into_lane, lane_change_moves, meeting,
                                         passes, profile_spots,
-                                        shifted_start, started_at_speed, stopped_on_ring, stopped_past,
+                                        shift_light, shifted_start, standing_start, started_at_speed, stopped_on_ring, stopped_past,
                                         walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 
@@ -95,6 +96,8 @@ CONFLICT_NEAR_M = 5.0
 TURN_BESIDE_M = 5.0
 #: share of the aims at a crossing car in a lane change that start the ego late on a lane that does not lead on
 LATE_CHANGE_SHARE = 0.7
+#: share of the aims at a crossing car while the ego accelerates that start it standing just before its first junction
+STANDING_CROSS_SHARE = 0.8
 #: [m] past a lane change's place where an oncoming car is level with the ego
 ONCOMING_AFTER_CHANGE_M = 12.0
 #: share of the aimed components built on the mission alone (the parent's actors, puddles and light shifts
@@ -157,8 +160,14 @@ def _aimed_party(mut: Mutator, sc: Scenario, cell: str, row: str, col: str, rng:
             and rng.random() < LATE_CHANGE_SHARE:  # a late change, and a car across its way just after it
         late = shifted_start(mut, sc, rng, room=LATE_CHANGE_ROOM_M)
         if late is not None:
-            situation = Situation("crossing", "", partial(_late_change, want=row.split("/", 1)[1]))
+            situation = Situation("crossing", "", partial(_first_junction, want=row.split("/", 1)[1]))
             return _built(mut, sc, late[0], cell, late[1], situation, rng)
+    if col == "accelerate" and row in ("vehicle/crossing_left", "vehicle/crossing_right") \
+            and rng.random() < STANDING_CROSS_SHARE:  # pulling away just before a junction, a car across its way
+        standing = _standing_before_crossing(mut, sc, rng)
+        if standing is not None:
+            situation = Situation("crossing", "", partial(_first_junction, want=row.split("/", 1)[1]))
+            return _built(mut, sc, standing[0], cell, standing[1], situation, rng)
     if col == "lane_change":
         on, moves = sc, lane_change_moves(mut, sc)
         if not moves:  # the route needs no lane change from the seed's start lane: start on one that needs it
@@ -482,15 +491,29 @@ def _comes_from(mut, route, option, want: str) -> bool:
     return math.pi / 4 < abs(dh) < 3 * math.pi / 4 and (dh > 0) == (want == "crossing_right")
 
 
-def _late_change(mut, sc, rng, want: str):
+def _first_junction(mut, sc, rng, want: str):
     """A car that crosses the ego's way from ``want`` at the junction at the end of its start edge, through its path
-    just ahead of it (:data:`LATE_CHANGE_CLEARS_S`), running its red where no lawful car can come: on a mission
-    whose ego starts late on a lane that does not lead on (:data:`LATE_CHANGE_ROOM_M`), it meets the ego in its lane
-    change. (A car timed to a change the route makes at the middle of a long edge met the ego 4 s or more after it:
-    none of 24 such draws on town met it in the change.)"""
+    just ahead of it (:data:`LATE_CHANGE_CLEARS_S`), running its red where no lawful car can come. On a mission whose
+    ego starts late on a lane that does not lead on (:data:`LATE_CHANGE_ROOM_M`), it meets the ego in its lane
+    change (a car timed to a change the route makes at the middle of a long edge met the ego 4 s or more after it:
+    none of 24 such draws on town met it in the change); on one whose ego stands just before that junction
+    (:func:`_standing_before_crossing`), as it speeds up towards it."""
     route = mut._route(sc)
     return cat.crossing_traffic(mut, sc, rng, keep=lambda o: o[0] == 0 and _comes_from(mut, route, o, want),
                                 runs_red=None, whole=True, clears=LATE_CHANGE_CLEARS_S)
+
+
+def _standing_before_crossing(mut, sc, rng) -> tuple[Scenario, str] | None:
+    """(``sc`` with the ego standing :data:`STANDING_CROSS_ROOM_M` before its first junction, that junction's light
+    shifted to turn green as it comes; what was done), None where it cannot."""
+    first = next((j for j in _marks(mut, sc)["junctions"] if j[1] == 0), None)
+    standing = None if first is None else standing_start(mut, sc, rng, STANDING_CROSS_ROOM_M)
+    if standing is None or first[2] != "signal":
+        return standing
+    new, setup = standing
+    lit, desc = shift_light(mut, new, mut.rmap.edge(sc.mission.start_edge).getLength() - new.mission.start_pos,
+                            "signal/green", rng)
+    return None if lit is None else (lit, f"{setup}; {desc}")
 
 
 def _end_heading(edge) -> float:

@@ -137,7 +137,7 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random,
     the separation of the ego's new one. On a route whose lanes lead on everywhere (every seed of the
     intersection), it is what makes an ADS that changes lanes only where its route needs it change lanes at all.
     With ``room`` [m] (a range), the ego also starts that far before the edge's end, where there is so much room:
-    it changes lanes late, a few seconds before the junction (``aim._late_change``)."""
+    it changes lanes late, a few seconds before the junction (``aim._first_junction``)."""
     rmap, m = mut.rmap, sc.mission
     start = rmap.lane(m.start_lane)
     edge = start.getEdge()
@@ -171,7 +171,35 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random,
     return new, f"{SHIFTED_START} {lane_id}{late} (was {sc.mission.start_lane}): its route makes it change lanes"
 
 
-#: [m] before its start edge's end that the ego starts for a lane change late (``aim._late_change``): the reference
+def standing_start(mut: Mutator, sc: Scenario, rng: random.Random,
+                   room: tuple[float, float]) -> tuple[Scenario, str] | None:
+    """(``sc`` with the ego standing on its start lane ``room`` [m] (a range) before its start edge's end; what was
+    done), None where that lane does not lead on, the seed starts it closer, or an actor the seed placed would be
+    left behind or too close. The route and goal stay: a driver who pulls away from the kerb near a junction, still
+    speeding up as it comes to it (``aim._standing_before_crossing``)."""
+    rmap, m = mut.rmap, sc.mission
+    edge = rmap.lane(m.start_lane).getEdge()
+    if edge.getLength() - m.start_pos < room[1] or mut.lane_change_at(sc, 0) is not None:
+        return None
+    pos = round(edge.getLength() - rng.uniform(*room), 2)
+    sep = mut.cfg.min_separation + EGO_LENGTH / 2
+    x, y, _ = rmap.geom(m.start_lane).position(pos)
+    for a in sc.actors:
+        ax, ay, _ = rmap.geom(a.start_lane).position(a.start_pos)
+        if math.hypot(x - ax, y - ay) < sep or (rmap.lane(a.start_lane).getEdge().getID() == edge.getID()
+                                               and m.start_pos - 5.0 < a.start_pos < pos + 5.0):
+            return None
+    new = sc.model_copy(update={"mission": m.model_copy(update={"start_pos": pos, "start_speed": 0.0})})
+    return new, (f"the ego starts standing {edge.getLength() - pos:.0f} m before the end of {edge.getID()} (was "
+                 f"{m.start_pos:.0f} m on, at {m.start_speed:.1f} m/s)")
+
+
+#: [m] before its start edge's end that the ego stands for a crossing car met as it speeds up: at 2 m/s^2 it has
+#: driven 9 m in the 3 s that count as stop and go, and comes to the stop line 3.5-4.7 s after it sets off
+STANDING_CROSS_ROOM_M = (12.0, 22.0)
+
+
+#: [m] before its start edge's end that the ego starts for a lane change late (``aim._first_junction``): the reference
 #: ADS crosses the lane line 45 % of the way from 8 m behind its start to the edge's end, here 20-27 m before the
 #: stop line (from 60 m, as a start on another lane needs, some 40 m: 4-6 s before the junction on town)
 LATE_CHANGE_ROOM_M = (30.0, 40.0)
