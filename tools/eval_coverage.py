@@ -108,7 +108,8 @@ def run_one(network: str, feedback: str, rep: int, opts: dict) -> dict:
             "share": cov["share"], "first": first, "first_of_signature": first_of_signature, "signatures": signatures,
             "wall": wall,
             "cells": sorted(c for c, h in cov["cells"].items() if h["count"]),
-            "aimed": {c: h["aimed"] for c, h in cov["cells"].items() if h.get("aimed")}}
+            "aimed": {c: h["aimed"] for c, h in cov["cells"].items() if h.get("aimed")},
+            "outside": sorted(cov.get("outside") or ())}
 
 
 def _fault_finding(out: Path, judged: dict[str, bool], every: bool = False) -> tuple[int | None, int | None, int]:
