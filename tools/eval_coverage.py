@@ -286,6 +286,10 @@ def _spread(fb: str, rows: list[dict], missed: bool) -> None:
     total = rows[0]["reachable"]
     print(f"{'':<14}{'':>6}  {fb:<8}union {len(union)} ({100 * len(union) / max(total, 1):.1f}%), in every "
           f"repetition {len(every)}, in some {len(union - every)}, in none {total - len(union)}")
+    outside = [set(r.get("outside") or ()) for r in rows]
+    if any(outside):  # reached, not derived: where the derivation says the network cannot offer a cell it did
+        print(f"{'':<14}{'':>6}  {fb:<8}outside the derivation: "
+              + ", ".join(f"{c} ({sum(c in o for o in outside)}/{len(rows)})" for c in sorted(set().union(*outside))))
     if not missed:
         return
     for cell in sorted(union - every):
