@@ -54,11 +54,9 @@ from drivefuzz.search.fairness import lane_limit
 from drivefuzz.search.aim_place import (FOLLOW_TURN_CLOSE_S, GRIP_ACCEL_LENGTH_M, GRIP_START_BEHIND_M,
                                         GRIP_START_LENGTH_M, GRIP_START_MU, JUNCTION_COLUMNS,
                                         LATE_CHANGE_CLEARS_S, LATE_CHANGE_ROOM_M, STANDING_CROSS_ROOM_M,
-                                        START_SPOTS_M,
-                                        drawn_level, follower_at, grip_at, into_lane, lane_change_moves, meeting,
-                                        passes, profile_spots,
-                                        shift_light, shifted_start, standing_start, started_at_speed, stopped_on_ring, stopped_past,
-                                        walker_from_left)
+                                        START_SPOTS_M, drawn_level, follower_at, grip_at, into_lane, lane_change_moves,
+                                        meeting, passes, profile_spots, shift_light, shifted_start, standing_start,
+                                        started_at_speed, stopped_on_ring, stopped_past, walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 
 #: [m] past the place where the ego stops (a light's stop line: before it) that a car beside it stands, its front
@@ -460,23 +458,17 @@ def _crossing(mut, sc, rng, want: str, col: str, at: float | None = None):
         beside = cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=True, whole=True, zone=TURN_BESIDE_M)
         if beside is not None:
             return beside
-    lawful = partial(cat.crossing_traffic, keep=keep, runs_red=col == "signal/amber", whole=True)
-    if want == "oncoming" or col not in ("turn_left", "turn_right"):
-        return lawful(mut, sc, rng)
-
-    def cuts(mut, sc, rng):
-        """A car from that side that does not yield to the turning ego (at the ego's green, or on a major road the
-        ego turns off); where no path crosses the ego's, one that comes into the road it turns into beside it."""
+    if want != "oncoming" and col in ("turn_left", "turn_right"):
+        # a car from that side that does not yield to the turning ego (at the ego's green, or on a major road the ego
+        # turns off); where no path crosses the ego's, one that comes into the road it turns into beside it. A lawful
+        # car met the ego as it waited for it, in stop and go (lab, 3 draws per seed, vehicle crossing cells of the
+        # turns reached: interchange 0 -> 5 of 20, intersection 1 -> 14 of 18, town 15 -> 15 of 54; half and half: 2,
+        # 9, 12); a lawful one where none can be built
         for zone in (2.0, TURN_BESIDE_M):
-            built = cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=True, whole=True, zone=zone)
-            if built is not None:
-                return built
-        return None
-
-    # a lawful car met the ego as it waited for it, in stop and go (lab, 3 draws per seed, vehicle crossing cells of
-    # the turns reached: interchange 0 -> 5 of 20, intersection 1 -> 14 of 18, town 15 -> 15 of 54; half and half:
-    # 2, 9, 12); a lawful one where none can be built
-    return cuts(mut, sc, rng) or lawful(mut, sc, rng)
+            cuts = cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=True, whole=True, zone=zone)
+            if cuts is not None:
+                return cuts
+    return cat.crossing_traffic(mut, sc, rng, keep=keep, runs_red=col == "signal/amber", whole=True)
 
 
 def _comes_from(mut, route, option, want: str) -> bool:

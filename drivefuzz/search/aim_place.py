@@ -145,9 +145,8 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random,
         return None
     if room:
         m = m.model_copy(update={"start_pos": round(edge.getLength() - rng.uniform(*room), 2)})
-        if any(rmap.lane(a.start_lane).getEdge().getID() == edge.getID()
-               and sc.mission.start_pos - 5.0 < a.start_pos < m.start_pos + 5.0 for a in sc.actors):
-            return None  # an actor the seed placed between the old start and the new one would be left behind
+        if _left_behind(mut, sc, m.start_pos):
+            return None
     sep = mut.cfg.min_separation + EGO_LENGTH / 2
     options = []
     for lane in edge.getLanes():
@@ -184,14 +183,20 @@ def standing_start(mut: Mutator, sc: Scenario, rng: random.Random,
     pos = round(edge.getLength() - rng.uniform(*room), 2)
     sep = mut.cfg.min_separation + EGO_LENGTH / 2
     x, y, _ = rmap.geom(m.start_lane).position(pos)
-    for a in sc.actors:
-        ax, ay, _ = rmap.geom(a.start_lane).position(a.start_pos)
-        if math.hypot(x - ax, y - ay) < sep or (rmap.lane(a.start_lane).getEdge().getID() == edge.getID()
-                                               and m.start_pos - 5.0 < a.start_pos < pos + 5.0):
-            return None
+    if _left_behind(mut, sc, pos) or any(math.hypot(x - ax, y - ay) < sep for ax, ay, _ in
+                                         (rmap.geom(a.start_lane).position(a.start_pos) for a in sc.actors)):
+        return None
     new = sc.model_copy(update={"mission": m.model_copy(update={"start_pos": pos, "start_speed": 0.0})})
     return new, (f"the ego starts standing {edge.getLength() - pos:.0f} m before the end of {edge.getID()} (was "
                  f"{m.start_pos:.0f} m on, at {m.start_speed:.1f} m/s)")
+
+
+def _left_behind(mut: Mutator, sc: Scenario, pos: float) -> bool:
+    """Whether an actor the seed placed on the ego's start edge lies between its start and a later start at ``pos``
+    [m] (5 m either side): moved on, the ego would leave it behind."""
+    edge = mut.rmap.lane(sc.mission.start_lane).getEdge().getID()
+    return any(mut.rmap.lane(a.start_lane).getEdge().getID() == edge
+               and sc.mission.start_pos - 5.0 < a.start_pos < pos + 5.0 for a in sc.actors)
 
 
 #: [m] before its start edge's end that the ego stands for a crossing car met as it speeds up: at 2 m/s^2 it has
