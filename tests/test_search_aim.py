@@ -306,8 +306,11 @@ def test_a_campaign_shares_its_cells_among_its_seed_jobs(town_seeds):
     assert len(stuck) <= 15 and sum(not can_aim(rmap, town_seeds[i], c, i) for c, i in
                                     {c: i for i, cells in enumerate(shares) for c in cells}.items()) >= 35
     cell = "party-element:vehicle/crossing_right|signal/green"
-    assert not can_aim(rmap, town_seeds[0], cell, 0) and cell in shares[0] and cell in built[4]
-    assert can_aim(rmap, town_seeds[4], cell, 4)
+    plain = {c: i for i, cells in enumerate(shares) for c in cells}
+    assert not can_aim(rmap, town_seeds[0], cell, 0) and cell in reaches[0]  # seed 000 offers it and cannot aim
+    assert can_aim(rmap, town_seeds[owner[cell]], cell, owner[cell])  # it goes to one that can
+    moved = [c for c, i in plain.items() if not can_aim(rmap, town_seeds[i], c, i) and c not in stuck]
+    assert moved and all(owner[c] != plain[c] and can_aim(rmap, town_seeds[owner[c]], c, owner[c]) for c in moved)
 
     a, b, c = "party-element:vehicle/ahead|edge", "party-manoeuvre:vehicle/behind|brake", "speed-condition:0-10 km/h|fog"
     assert aim_cells([a, b, c], set(), {}, own=[c]) == [c]

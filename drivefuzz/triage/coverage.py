@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import numpy as np
+from shapely import STRtree
 from shapely.geometry import LineString
 
 from drivefuzz.search.episodes import GAP_M, PET_S, TTC_S  # the thresholds of a close encounter
@@ -149,12 +150,16 @@ def classify(scenario, trace, rmap, actor: str | None, f: int) -> Encounter:
     """Classify the encounter with ``actor`` (None: grip) at frame ``f`` (see the module docstring)."""
     f = min(max(int(f), 0), trace.n_frames - 1)
     elem = element(scenario, trace, rmap, f)
-    return Encounter(actor, f, party(trace, actor, f), manoeuvre(trace, f, elem, rmap), elem,
+    return Encounter(actor, f, party(trace, actor, f, rmap), manoeuvre(trace, f, elem, rmap), elem,
                      speed_band(float(trace["speed"][f])), conditions(scenario, trace, f))
 
 
-def party(trace, actor: str | None, f: int) -> str:
-    """``<kind>/<approach>`` of the other party, read :data:`APPROACH_S` s before ``f`` (or when it appeared)."""
+def party(trace, actor: str | None, f: int, rmap=None) -> str:
+    """``<kind>/<approach>`` of the other party, read :data:`APPROACH_S` s before ``f`` (or when it appeared). A
+    vehicle's heading is read against the ego's heading then, or (given ``rmap``) where the ego is on a roundabout's
+    ring or in its junctions then, against the ego's way where that vehicle is (the ring bends under the ego: a car
+    coming onto the ring ahead heads 30 degrees off the ego's heading, or against it, and 60-90 degrees off the ego's
+    way there; until the twenty-first session it was read beside the ego, or oncoming)."""
     if actor is None:
         return "none/grip"
     track = actor_track(trace, actor)
@@ -171,17 +176,18 @@ def party(trace, actor: str | None, f: int) -> str:
             return "pedestrian/along"
         dh = abs(wrap_angle(math.atan2(dy, dx) - float(trace["heading"][k])))
         return f"pedestrian/crossing_{side}" if math.pi / 4 < dh < 3 * math.pi / 4 else "pedestrian/along"
-    dh = abs(wrap_angle(float(track.heading[k]) - float(trace["heading"][k])))
     with np.errstate(invalid="ignore"):  # NaN where it was not there: not moving
         moving = bool(np.any(np.asarray(track.speed[k:f + 1], dtype=float) > 0.5))
     lx, ly, way = along_path(trace, k, float(track.x[k]), float(track.y[k]), heading=True)
+    ring = rmap is not None and _on_ring(str(trace["lane"][k]), _features(rmap))
+    dh = abs(wrap_angle(float(track.heading[k]) - (way if ring else float(trace["heading"][k]))))
     # on the ego's path and going its way there (a car behind it, or ahead of it, as it turns): neither oncoming nor
     # crossing, however the ego itself heads now (by that alone a car following it through a turn crossed it)
     if moving and not (abs(ly) < SAME_LANE_M and abs(wrap_angle(float(track.heading[k]) - way)) <= math.pi / 4):
         if dh >= 3 * math.pi / 4:
             return "vehicle/oncoming"
         if dh > math.pi / 4:
-            return f"vehicle/crossing_{side}"
+            return f"vehicle/crossing_{('left' if ly > 0 else 'right') if ring else side}"
     side = "left" if ly > 0 else "right"
     if abs(ly) < SAME_LANE_M:
         return "vehicle/ahead" if lx > 0 else "vehicle/behind"
@@ -203,8 +209,8 @@ def manoeuvre(trace, f: int, elem: str, rmap=None) -> str:
         turn = float(heading[-1] - heading[0]) if len(heading) > 1 else 0.0
         if abs(turn) >= TURN:
             base = "turn_left" if turn > 0 else "turn_right"
-        elif lane_changed(trace, f, WINDOW_S) or (rmap is not None and lateral_shift(trace, rmap, f, WINDOW_S)
-                                                   >= LANE_SHIFT_M):
+        elif lane_changed(trace, f, WINDOW_S) or (rmap is not None and _has_lanes_beside(trace, rmap, f)
+                                                   and lateral_shift(trace, rmap, f, WINDOW_S) >= LANE_SHIFT_M):
             base = "lane_change"
         else:
             ax = trace["ax"][frames_before(trace, f, 1.0)]
@@ -215,6 +221,17 @@ def manoeuvre(trace, f: int, elem: str, rmap=None) -> str:
     if elem == "roundabout" and base in ("cruise", "accelerate", "turn_left", "turn_right"):
         return "roundabout"
     return base
+
+
+def _has_lanes_beside(trace, rmap, f: int) -> bool:
+    """Whether the ego's edge at the start of the window up to ``f`` has another lane for cars: a metre sideways
+    within the only lane (a swerve, a wide line on a ring) is no lane change (until the twenty-first session it
+    counted as one, and the roundabout's campaigns met cars in 'lane changes' that its one-lane roads cannot
+    offer)."""
+    lane = str(trace["lane"][frames_before(trace, f, WINDOW_S).start])
+    if not lane or lane.startswith(":") or not rmap.has_lane(lane):
+        return False
+    return sum(1 for ln in rmap.lane(lane).getEdge().getLanes() if ln.allows("passenger")) >= 2
 
 
 def element(scenario, trace, rmap, f: int) -> str:
@@ -342,12 +359,19 @@ def reachable_places(rmap, scenarios: Iterable) -> dict[str, frozenset[str]]:
                 offer(f"party-manoeuvre:{p}|{m}")
     for pl in places:
         parties = pl["parties"]
-        roadside = {p for p in parties if not p.startswith("vehicle/crossing")}  # crossing traffic meets at junctions
-        for p in roadside:
-            offer(f"party-element:{p}|edge")
+        # a car across the ego's way meets it on the road after the junction too: a post-encroachment is dated at
+        # the later arrival, and a car coming the other way on the road turned into is read across it mid-turn
+        for p in parties:
+            if pl["element"] == "roundabout":  # every frame on a ring is the roundabout
+                continue
+            if not p.startswith("vehicle/crossing") or pl["element"] is None or pl["after"] == "edge":
+                offer(f"party-element:{p}|edge")
+            elif pl["after"] == "ramp":
+                offer(f"party-element:{p}|ramp")
+                offer(f"party-manoeuvre:{p}|merge")
         if pl["element"]:  # a ring or a ramp is its own place, a control is its junction's
             node = pl["node"] if pl["element"] not in ("ramp", "roundabout") else None
-            for p in (roadside if pl["element"] == "ramp" else parties):
+            for p in parties:
                 for e in _phases(pl["element"]):
                     offer(f"party-element:{p}|{e}", node)
         if pl["turn"]:
@@ -357,7 +381,7 @@ def reachable_places(rmap, scenarios: Iterable) -> dict[str, frozenset[str]]:
             for p in parties:
                 offer(f"party-manoeuvre:{p}|lane_change")
         if pl["element"] == "ramp":
-            for p in roadside:
+            for p in parties:
                 offer(f"party-manoeuvre:{p}|merge")
         if pl["element"] == "roundabout":  # traffic entering the ring meets the ego across its path
             for p in parties:
@@ -400,38 +424,70 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
                 _link_features(rmap, edge, rmap.edge(nxt), node, link)
             parties = {"vehicle/ahead", "vehicle/behind", "none/grip"} | _road_parties(edge)
             multilane = len(drive) >= 2
-            parties |= link["crossing"]
+            parties |= link["crossing"] | beside_sides(rmap, eid, nxt)
             sidewalk = any(ln.allows("pedestrian") and not ln.allows("passenger") for ln in lanes)
             if node.getID() in _crossing_nodes(rmap):
                 parties |= {f"pedestrian/{a}" for a in PEDESTRIAN_APPROACHES}
             element = ("roundabout" if eid in feats["ring_edges"] else "ramp" if eid in feats["ramp_edges"] else None)
             vmax = max((ln.getSpeed() for ln in drive), default=0.0)
-            base = {"multilane": multilane, "vmax": vmax, "parties": parties, "node": node.getID()}
+            after = ("roundabout" if nxt in feats["ring_edges"] else "ramp" if nxt in feats["ramp_edges"] else
+                     "edge" if nxt else None)  # the road the ego is on after the junction
+            base = {"multilane": multilane, "vmax": vmax, "parties": parties, "node": node.getID(), "after": after}
             if before in feats["ring_edges"] and eid not in feats["ring_edges"]:  # off the ring: the turn out of
                 out_turn = link_turn(rmap, before, eid)  # it counts on this road, with this road's parties and
                 if out_turn:  # the traffic that comes across its way out there
                     out.append(dict(base, element=None, turn=out_turn, node=edge.getFromNode().getID(),
                                     parties=parties | crossing_sides(rmap, before, eid)))
             if element is None and node.getID() in feats["ring_nodes"] and nxt in feats["ring_edges"]:
-                # onto the ring: in its junction the ego is on the roundabout, and the ring's traffic crosses it there
-                out.append(dict(base, element="roundabout", turn=None,
-                                parties={"vehicle/ahead", "vehicle/behind", "none/grip"} | link["crossing"]))
+                # onto the ring: in its junction the ego is on the roundabout, the ring's traffic crosses it there (and,
+                # as the ego turns in, comes in beside it), and a car leaving by this arm's way out comes towards it
+                ring = {"vehicle/ahead", "vehicle/behind", "none/grip"} | link["crossing"] | beside_sides(rmap, eid, nxt)
+                ring |= {"vehicle/oncoming"} if _has_opposite(edge) else set()
+                out.append(dict(base, element="roundabout", turn=None, parties=ring))
+                # before the way onto the ring, its traffic comes across from the other side too: 2 s before it comes
+                # round to meet the ego, a car on the ring's far side heads the other way across the ego's (the
+                # roundabout's 'from the right' in 3 of 5 campaigns of the twentieth session)
+                if link["crossing"]:
+                    parties |= {"vehicle/crossing_left", "vehicle/crossing_right"}
+            turns = sorted(link["turns"]) or [None]
+            into = _into(rmap, eid, nxt, turns[0]) if turns[0] else set()  # a turn counts on the road it leads into
             if element:  # a ring or ramp edge: its own element (and the manoeuvre it implies), no turns
+                own = set(parties)
+                if element == "ramp":  # on a ramp up to a junction, the cars that cross the ego's turn there
+                    own |= {p for p in into if p.startswith("vehicle/crossing")}
                 if not sidewalk:  # nobody walks on a ring or a ramp without a pavement
-                    base["parties"] = {p for p in parties if not p.startswith("pedestrian/")}
-                out.append(dict(base, element=element, turn=None))
+                    own = {p for p in own if not p.startswith("pedestrian/")}
+                out.append(dict(base, element=element, turn=None, parties=own))
                 if element == "roundabout":  # on the ring every frame is the roundabout, its nodes too
                     continue
             controls = sorted(link["elements"]) or [None]
-            turns = sorted(link["turns"]) or [None]
-            into = _road_parties(rmap.edge(nxt)) if nxt else set()  # a turn counts on the road it leads into too
-            if "vehicle/oncoming" in into and not oncoming_into(rmap, eid, nxt):
-                into.discard("vehicle/oncoming")
             for control in controls:
                 for turn in turns:
                     out.append(dict(base, element=control, turn=turn) if turn is None else
                                dict(base, element=control, turn=turn, parties=parties | into))
     return out
+
+
+def _into(rmap, edge_id: str, next_id: str, turn: str) -> set[str]:
+    """Who can meet the ego as it turns (``turn``) from ``edge_id`` into ``next_id`` on the road turned into: its
+    road parties (:func:`_road_parties`), a car the other way only where :func:`oncoming_into` says, and that car
+    also as crossing from the turn's side (read mid-turn, its heading is square to the ego's: the reference ADS's
+    turns off the roundabout met cars coming in on the road out, 'from the right', in every campaign)."""
+    into = _road_parties(rmap.edge(next_id))
+    if "vehicle/oncoming" in into:
+        if oncoming_into(rmap, edge_id, next_id):
+            into.add(f"vehicle/crossing_{turn.split('_', 1)[1]}")
+        else:
+            into.discard("vehicle/oncoming")
+    return into
+
+
+def _bent_sides(crossing: Iterable[str]) -> set[str]:
+    """The sides (and rear quarters) from which the crossing traffic of a ring's junction (``crossing``) is read as
+    the ring bends: a car coming onto the ring 2 s before it meets the ego heads within 45 degrees of the ego's way
+    (:func:`party`), beside it."""
+    return {f"vehicle/{q}{c.rsplit('_', 1)[1]}" for c in crossing if c.startswith("vehicle/crossing_")
+            for q in ("", "rear_")}
 
 
 def _road_parties(edge) -> set[str]:
@@ -533,6 +589,60 @@ def crossing_sides(rmap, edge_id: str, next_id: str) -> frozenset[str]:
     across: the way onto a roundabout (its ring comes from the left) offered cars crossing from the right, and the
     turn out of it cars from the left."""
     return _approaches_near(rmap, edge_id, next_id) - {"vehicle/oncoming"}
+
+
+#: [m] another road's lane (or a junction's) whose centre line runs this close to the ego's way, at under 45 degrees to
+#: it, carries cars that :func:`party` counts beside the ego; measured: the interchange's one-lane exit ramp runs 4.8 m
+#: from the highway's lane beside it, and its campaigns met cars there 'behind left' (twentieth session)
+BESIDE_M = 6.0
+
+
+@lru_cache(maxsize=16)
+def _car_lanes(rmap) -> tuple[tuple[str, ...], tuple[LineString, ...], STRtree]:
+    """Every lane for cars (internal lanes too): ids, centre lines, and a tree over the lines."""
+    ids, lines = [], []
+    for e in rmap.net.getEdges(withInternal=False):
+        for ln in e.getLanes():
+            if ln.allows("passenger") and rmap.is_normal_edge(e):
+                ids.append(ln.getID())
+                lines.append(LineString([tuple(map(float, p)) for p in rmap.geom(ln.getID()).pts]))
+    return tuple(ids), tuple(lines), STRtree(lines)
+
+
+@lru_cache(maxsize=4096)
+def beside_sides(rmap, edge_id: str, next_id: str) -> frozenset[str]:
+    """``vehicle/left``, ``rear_left`` (and the right's) where another road's lane for cars runs beside the ego's way
+    along ``edge_id`` and through its link to ``next_id``: within :data:`BESIDE_M` of it, further than a car beside
+    in the ego's own lane (:data:`SAME_LANE_M`), at under 45 degrees (a one-lane ramp beside a highway, the ring
+    beside the last metres onto a roundabout). A road of several lanes offers its sides anyway (:func:`_road_parties`);
+    until the twenty-first session only such a road offered any."""
+    edge = rmap.edge(edge_id)
+    mine = [LineString([tuple(map(float, p)) for p in rmap.geom(ln.getID()).pts])
+            for ln in edge.getLanes() if ln.allows("passenger")]
+    own = {ln.getID() for ln in edge.getLanes()}  # and the lanes it continues from and into: the ego's own way
+    own |= {c.getToLane().getID() for ln in edge.getLanes() for c in ln.getOutgoing()}
+    own |= {c.getFromLane().getID() for e in edge.getIncoming() for c in e.getConnections(edge)}
+    ids, lines, tree = _car_lanes(rmap)
+    out: set[str] = set()
+    for way in mine:
+        near = [i for i in tree.query(way, predicate="dwithin", distance=BESIDE_M) if ids[i] not in own]
+        for d in np.arange(0.0, way.length, 2.0):
+            p, q = way.interpolate(d), way.interpolate(min(d + 1.0, way.length))
+            h = math.atan2(q.y - p.y, q.x - p.x)
+            for i in near:
+                other = lines[i]
+                if not SAME_LANE_M <= other.distance(p) <= BESIDE_M:
+                    continue
+                t = other.project(p)
+                a, b = other.interpolate(max(t - 0.5, 0.0)), other.interpolate(min(t + 0.5, other.length))
+                if abs(wrap_angle(math.atan2(b.y - a.y, b.x - a.x) - h)) >= math.pi / 4:
+                    continue
+                c = other.interpolate(t)
+                side = "left" if math.cos(h) * (c.y - p.y) - math.sin(h) * (c.x - p.x) > 0 else "right"
+                out |= {f"vehicle/{side}", f"vehicle/rear_{side}"}
+        if len(out) == 4:
+            break
+    return frozenset(out)
 
 
 def _approaches_near(rmap, edge_id: str, next_id: str) -> frozenset[str]:
