@@ -222,11 +222,12 @@ def test_a_road_beside_a_one_lane_ramp_offers_its_side(offered):
     one-lane exit ramp runs 4.8 m from the highway's lane on its left, and its campaigns met cars there in every
     repetition (twentieth session) while the derivation offered sides only on a road of several lanes."""
     interchange = load_roadmap(ROOT / "networks" / "interchange.net.xml")
-    assert beside_sides(interchange, "WBexit", "") == {"vehicle/left", "vehicle/rear_left"}
+    assert beside_sides(interchange, "WBexit") == {"vehicle/left", "vehicle/rear_left"}
     highway = load_roadmap(ROOT / "networks" / "highway.net.xml")
-    assert beside_sides(highway, "onramp", "") == {"vehicle/left", "vehicle/rear_left"}  # not the lane it runs into
+    assert beside_sides(highway, "onramp") == {"vehicle/left", "vehicle/rear_left"}  # not the lane it runs into
     roundabout = load_roadmap(ROOT / "networks" / "roundabout.net.xml")
-    assert beside_sides(roundabout, "Sin", "ringSE") == frozenset()  # its way out runs the other way beside it
+    assert beside_sides(roundabout, "Sin") == frozenset()  # its way out runs the other way beside it
+    assert beside_sides(interchange, "WBexit", 30.0) == frozenset()  # the highway leaves it before its signal
     assert {"party-element:vehicle/left|ramp", "party-manoeuvre:vehicle/rear_left|merge"} <= offered["interchange"]
     assert "party-element:vehicle/right|ramp" not in offered["interchange"]
 

@@ -350,9 +350,9 @@ def reachable_places(rmap, scenarios: Iterable) -> dict[str, frozenset[str]]:
         if node:
             at.add(node)
 
-    anywhere = set().union(*(p["parties"] for p in places))
+    anywhere = set().union(*(p["parties"] | p["along"] for p in places))
     # on a ring (its junctions too) or a ramp a cruise or an acceleration is the roundabout or the merge
-    off = set().union(*(p["parties"] for p in places if p["element"] not in ("roundabout", "ramp")))
+    off = set().union(*(p["parties"] | p["along"] for p in places if p["element"] not in ("roundabout", "ramp")))
     for p in anywhere:
         for m in ("cruise", "accelerate", "brake", "stop_go"):
             if p in off or m in ("brake", "stop_go"):
@@ -361,7 +361,7 @@ def reachable_places(rmap, scenarios: Iterable) -> dict[str, frozenset[str]]:
         parties = pl["parties"]
         # a car across the ego's way meets it on the road after the junction too: a post-encroachment is dated at
         # the later arrival, and a car coming the other way on the road turned into is read across it mid-turn
-        for p in parties:
+        for p in parties | pl["along"]:  # and a car on a road beside this one, anywhere along it
             if pl["element"] == "roundabout":  # every frame on a ring is the roundabout
                 continue
             if not p.startswith("vehicle/crossing") or pl["element"] is None or pl["after"] == "edge":
@@ -424,7 +424,7 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
                 _link_features(rmap, edge, rmap.edge(nxt), node, link)
             parties = {"vehicle/ahead", "vehicle/behind", "none/grip"} | _road_parties(edge)
             multilane = len(drive) >= 2
-            parties |= link["crossing"] | beside_sides(rmap, eid, nxt)
+            parties |= link["crossing"] | beside_sides(rmap, eid, APPROACH_M)  # beside it near its junction
             sidewalk = any(ln.allows("pedestrian") and not ln.allows("passenger") for ln in lanes)
             if node.getID() in _crossing_nodes(rmap):
                 parties |= {f"pedestrian/{a}" for a in PEDESTRIAN_APPROACHES}
@@ -432,7 +432,9 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
             vmax = max((ln.getSpeed() for ln in drive), default=0.0)
             after = ("roundabout" if nxt in feats["ring_edges"] else "ramp" if nxt in feats["ramp_edges"] else
                      "edge" if nxt else None)  # the road the ego is on after the junction
-            base = {"multilane": multilane, "vmax": vmax, "parties": parties, "node": node.getID(), "after": after}
+            along = set(beside_sides(rmap, eid))  # a road beside this one, anywhere along it (not at its junction)
+            base = {"multilane": multilane, "vmax": vmax, "parties": parties, "node": node.getID(), "after": after,
+                    "along": along}
             if before in feats["ring_edges"] and eid not in feats["ring_edges"]:  # off the ring: the turn out of
                 out_turn = link_turn(rmap, before, eid)  # it counts on this road, with this road's parties and
                 if out_turn:  # the traffic that comes across its way out there
@@ -441,7 +443,8 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
             if element is None and node.getID() in feats["ring_nodes"] and nxt in feats["ring_edges"]:
                 # onto the ring: in its junction the ego is on the roundabout, the ring's traffic crosses it there (and,
                 # as the ego turns in, comes in beside it), and a car leaving by this arm's way out comes towards it
-                ring = {"vehicle/ahead", "vehicle/behind", "none/grip"} | link["crossing"] | beside_sides(rmap, eid, nxt)
+                ring = {"vehicle/ahead", "vehicle/behind", "none/grip"} | link["crossing"]
+                ring |= beside_sides(rmap, eid, APPROACH_M)
                 ring |= {"vehicle/oncoming"} if _has_opposite(edge) else set()
                 out.append(dict(base, element="roundabout", turn=None, parties=ring))
                 # before the way onto the ring, its traffic comes across from the other side too: 2 s before it comes
@@ -455,6 +458,7 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
                 own = set(parties)
                 if element == "ramp":  # on a ramp up to a junction, the cars that cross the ego's turn there
                     own |= {p for p in into if p.startswith("vehicle/crossing")}
+                own |= along
                 if not sidewalk:  # nobody walks on a ring or a ramp without a pavement
                     own = {p for p in own if not p.startswith("pedestrian/")}
                 out.append(dict(base, element=element, turn=None, parties=own))
@@ -536,6 +540,7 @@ def _link_features(rmap, edge, nxt, node, out: dict[str, Any]) -> None:
 #: gap (:data:`GAP_M`, a car's width, and room for both to be off their lines: the reference ADS swung out of a
 #: roundabout's exit to within 0.7 m of a car on the road in beside it, whose centre line is 3.5 m from the exit's)
 CONFLICT_M = 5.0
+APPROACH_M = 30.0  #: [m] the approach to a junction, where a car beside the ego meets it at that junction
 
 
 @lru_cache(maxsize=4096)
@@ -610,15 +615,21 @@ def _car_lanes(rmap) -> tuple[tuple[str, ...], tuple[LineString, ...], STRtree]:
 
 
 @lru_cache(maxsize=4096)
-def beside_sides(rmap, edge_id: str, next_id: str) -> frozenset[str]:
-    """``vehicle/left``, ``rear_left`` (and the right's) where another road's lane for cars runs beside the ego's way
-    along ``edge_id`` and through its link to ``next_id``: within :data:`BESIDE_M` of it, further than a car beside
-    in the ego's own lane (:data:`SAME_LANE_M`), at under 45 degrees (a one-lane ramp beside a highway, the ring
-    beside the last metres onto a roundabout). A road of several lanes offers its sides anyway (:func:`_road_parties`);
-    until the twenty-first session only such a road offered any."""
+def beside_sides(rmap, edge_id: str, last_m: float | None = None) -> frozenset[str]:
+    """``vehicle/left``, ``rear_left`` (and the right's) where another road's lane for cars runs beside a lane of
+    ``edge_id`` (over its last ``last_m`` m only, where given: the approach to its junction): within
+    :data:`BESIDE_M` of it, further than a car beside in the ego's own lane (:data:`SAME_LANE_M`), at under 45
+    degrees (a one-lane ramp beside a highway). The lanes the edge continues from and into are the ego's own way. A
+    road of several lanes offers its sides anyway (:func:`_road_parties`); until the twenty-first session only such
+    a road offered any."""
     edge = rmap.edge(edge_id)
-    mine = [LineString([tuple(map(float, p)) for p in rmap.geom(ln.getID()).pts])
-            for ln in edge.getLanes() if ln.allows("passenger")]
+    mine = []
+    for ln in edge.getLanes():
+        if ln.allows("passenger"):
+            g = rmap.geom(ln.getID())
+            pts = g.pts if last_m is None else [g.position(max(g.length - last_m, 0.0))[:2]] + list(
+                g.pts[g.cum > g.length - last_m])
+            mine.append(LineString([tuple(map(float, p)) for p in pts]))
     own = {ln.getID() for ln in edge.getLanes()}  # and the lanes it continues from and into: the ego's own way
     own |= {c.getToLane().getID() for ln in edge.getLanes() for c in ln.getOutgoing()}
     own |= {c.getFromLane().getID() for e in edge.getIncoming() for c in e.getConnections(edge)}
