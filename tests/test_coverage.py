@@ -37,6 +37,7 @@ from drivefuzz.triage.coverage import (
     manoeuvre,
     oncoming_into,
     party,
+    read_along,
     reachable,
     split,
     summarise,
@@ -213,7 +214,14 @@ def test_crossing_cars_are_offered_from_the_sides_whose_paths_meet_the_ego_s(off
     assert "party-element:vehicle/crossing_right|yield" in rb
     # met in the ring's junction as the ego enters: the roundabout, from the way onto it
     assert {"party-manoeuvre:vehicle/crossing_left|roundabout", "party-element:vehicle/crossing_left|roundabout",
-            "party-manoeuvre:vehicle/crossing_right|turn_right", "party-element:vehicle/crossing_left|yield"} <= rb
+            "party-element:vehicle/crossing_left|yield"} <= rb
+    # on the way out, the road in beside it runs the other way: read against the ego's way (the ego still on the
+    # ring), a car there comes towards it (until the twenty-first session read against its heading: from the right)
+    assert crossing_sides(roundabout, "ringEN", "Nout") == {"vehicle/crossing_right"}
+    assert read_along(roundabout, "ringEN", "Nout") == {"vehicle/oncoming"}
+    assert "party-manoeuvre:vehicle/oncoming|turn_right" in rb and "party-manoeuvre:vehicle/crossing_right|turn_right" \
+        not in rb
+    assert "vehicle/crossing_right" in read_along(roundabout, "ringEN", "ringNW")  # on the ring: the road in ahead
     assert "party-element:vehicle/crossing_right|priority" not in offered["town"]
 
 
@@ -236,14 +244,13 @@ def test_crossing_cars_are_offered_on_the_road_after_their_junction_and_on_a_ram
     """A crossing car meets the ego off its junction too: a post-encroachment is dated at the later arrival, the ego
     already on the road after the junction; and a car coming the other way on the road the ego turns into is read,
     mid-turn or just before it, coming across from the turn's side. On a ramp up to a junction (the interchange's
-    exit ramps to their signals) that is the ramp and the merge; on the roundabout's roads out, a car coming in
-    from the right. Until the twenty-first session only the junction's control was offered, and campaigns reached
+    exit ramps to their signals) that is the ramp and the merge. Until the twenty-first session only the junction's control was offered, and campaigns reached
     these cells in 2 to 5 of 5 repetitions on town, the interchange and the roundabout."""
     assert {"party-element:vehicle/crossing_left|edge", "party-element:vehicle/crossing_right|edge"} <= offered["town"]
     assert {"party-element:vehicle/crossing_left|ramp", "party-element:vehicle/crossing_right|ramp",
             "party-manoeuvre:vehicle/crossing_left|merge"} <= offered["interchange"]
-    rb = offered["roundabout"]
-    assert "party-element:vehicle/crossing_right|edge" in rb and "party-element:vehicle/crossing_left|edge" not in rb
+    rb = offered["roundabout"]  # the roads out: a car coming in beside them is oncoming (read along the ego's way)
+    assert not any(c.startswith("party-element:vehicle/crossing") and c.endswith("|edge") for c in rb)
     assert "vehicle/crossing" not in " ".join(offered["highway"])
 
 

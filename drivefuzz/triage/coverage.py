@@ -439,11 +439,11 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
                 out_turn = link_turn(rmap, before, eid)  # it counts on this road, with this road's parties and
                 if out_turn:  # the traffic that comes across its way out there
                     out.append(dict(base, element=None, turn=out_turn, node=edge.getFromNode().getID(),
-                                    parties=parties | crossing_sides(rmap, before, eid)))
+                                    parties=parties | read_along(rmap, before, eid)))
             if element is None and node.getID() in feats["ring_nodes"] and nxt in feats["ring_edges"]:
                 # onto the ring: in its junction the ego is on the roundabout, the ring's traffic crosses it there (and,
                 # as the ego turns in, comes in beside it), and a car leaving by this arm's way out comes towards it
-                ring = {"vehicle/ahead", "vehicle/behind", "none/grip"} | link["crossing"]
+                ring = {"vehicle/ahead", "vehicle/behind", "none/grip"} | link["crossing"] | read_along(rmap, eid, nxt)
                 ring |= beside_sides(rmap, eid, APPROACH_M)
                 ring |= {"vehicle/oncoming"} if _has_opposite(edge) else set()
                 out.append(dict(base, element="roundabout", turn=None, parties=ring))
@@ -455,7 +455,7 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
             turns = sorted(link["turns"]) or [None]
             into = _into(rmap, eid, nxt, turns[0]) if turns[0] else set()  # a turn counts on the road it leads into
             if element:  # a ring or ramp edge: its own element (and the manoeuvre it implies), no turns
-                own = set(parties)
+                own = set(parties) | (read_along(rmap, eid, nxt) if element == "roundabout" and nxt else set())
                 if element == "ramp":  # on a ramp up to a junction, the cars that cross the ego's turn there
                     own |= {p for p in into if p.startswith("vehicle/crossing")}
                 own |= along
@@ -654,6 +654,64 @@ def beside_sides(rmap, edge_id: str, last_m: float | None = None) -> frozenset[s
         if len(out) == 4:
             break
     return frozenset(out)
+
+
+#: [m] back along another car's path from where it comes nearest the ego's: where it was 2 s before it met the ego
+#: (:data:`APPROACH_S`) at the speeds of a roundabout
+READ_BACK_M = (5.0, 10.0, 15.0)
+
+
+@lru_cache(maxsize=4096)
+def read_along(rmap, edge_id: str, next_id: str) -> frozenset[str]:
+    """The vehicle parties that :func:`party` reads, against the ego's way, for the cars whose paths through the
+    junction at the end of ``edge_id`` come within :data:`CONFLICT_M` of the ego's to ``next_id``: where the ego is
+    on a roundabout's ring or in its junctions (there the classifier reads a car's heading and side against the
+    ego's way where that car is). Each such path is read :data:`READ_BACK_M` m back from its nearest point, against
+    the ego's line there: square to it, crossing from that side; against it, oncoming; within 45 degrees of it,
+    beside it on that side or in that rear quarter (a car coming onto the ring merges beside the ego). On the
+    roundabout's ways out the road in beside them runs the other way: a car there is oncoming, not crossing from
+    the right as :func:`crossing_sides` reads the junction (until the twenty-first session, when the classifier read
+    it against the ego's heading, still round the ring)."""
+    edge = rmap.edge(edge_id)
+    node = edge.getToNode()
+    ego = _link_lines(rmap, edge_id, next_id)
+    out: set[str] = set()
+    for e in node.getIncoming():
+        if e.getID() == edge_id or not rmap.is_normal_edge(e) or not e.allows("passenger"):
+            continue
+        for lane in e.getLanes():
+            if not lane.allows("passenger"):
+                continue
+            for c in lane.getOutgoing():
+                to = c.getToLane()
+                if not rmap.is_normal_edge(to.getEdge()) or to.getEdge().getToNode() is e.getFromNode():
+                    continue
+                theirs = _line(rmap, lane.getID(), to.getID(), c.getViaLaneID() or "")
+                for mine in ego:
+                    if theirs.distance(mine) >= CONFLICT_M:
+                        continue
+                    t0 = min(((theirs.project(mine.interpolate(d)), mine.interpolate(d).distance(theirs))
+                              for d in np.arange(0.0, mine.length, 1.0)), key=lambda x: x[1])[0]
+                    for back in READ_BACK_M:
+                        out.add(_read_at(mine, theirs, max(t0 - back, 0.0)))
+    return frozenset(out)
+
+
+def _read_at(mine: LineString, theirs: LineString, t: float) -> str:
+    """The party a car at ``t`` m along ``theirs`` is against the ego's way ``mine`` (:func:`party`)."""
+    p, q = theirs.interpolate(t), theirs.interpolate(min(t + 1.0, theirs.length))
+    h = math.atan2(q.y - p.y, q.x - p.x)
+    u = mine.project(p)
+    a, b = mine.interpolate(max(u - 0.5, 0.0)), mine.interpolate(min(u + 0.5, mine.length))
+    way = math.atan2(b.y - a.y, b.x - a.x)
+    c = mine.interpolate(u)
+    side = "left" if math.cos(way) * (p.y - c.y) - math.sin(way) * (p.x - c.x) > 0 else "right"
+    dh = abs(wrap_angle(h - way))
+    if dh >= 3 * math.pi / 4:
+        return "vehicle/oncoming"
+    if dh > math.pi / 4:
+        return f"vehicle/crossing_{side}"
+    return f"vehicle/{side}" if c.distance(p) >= SAME_LANE_M else "vehicle/behind"
 
 
 def _approaches_near(rmap, edge_id: str, next_id: str) -> frozenset[str]:
