@@ -475,8 +475,9 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
 def _into(rmap, edge_id: str, next_id: str, turn: str) -> set[str]:
     """Who can meet the ego as it turns (``turn``) from ``edge_id`` into ``next_id`` on the road turned into: its
     road parties (:func:`_road_parties`), a car the other way only where :func:`oncoming_into` says, and that car
-    also as crossing from the turn's side (read mid-turn, its heading is square to the ego's: the reference ADS's
-    turns off the roundabout met cars coming in on the road out, 'from the right', in every campaign)."""
+    also as crossing from the turn's side (read mid-turn, or on a ramp just before the turn, its heading is square
+    to the ego's: the interchange's campaigns met cars on the road turned into 'from the left' as the ego drove up
+    its exit ramp, in every repetition of the twentieth session)."""
     into = _road_parties(rmap.edge(next_id))
     if "vehicle/oncoming" in into:
         if oncoming_into(rmap, edge_id, next_id):
