@@ -487,14 +487,6 @@ def _into(rmap, edge_id: str, next_id: str, turn: str) -> set[str]:
     return into
 
 
-def _bent_sides(crossing: Iterable[str]) -> set[str]:
-    """The sides (and rear quarters) from which the crossing traffic of a ring's junction (``crossing``) is read as
-    the ring bends: a car coming onto the ring 2 s before it meets the ego heads within 45 degrees of the ego's way
-    (:func:`party`), beside it."""
-    return {f"vehicle/{q}{c.rsplit('_', 1)[1]}" for c in crossing if c.startswith("vehicle/crossing_")
-            for q in ("", "rear_")}
-
-
 def _road_parties(edge) -> set[str]:
     """Who can be beside or come towards the ego on ``edge``: the sides and rear quarters on a road of several
     lanes for cars, oncoming cars where a road runs the other way, walkers where it has a pavement."""
@@ -597,15 +589,15 @@ def crossing_sides(rmap, edge_id: str, next_id: str) -> frozenset[str]:
     return _approaches_near(rmap, edge_id, next_id) - {"vehicle/oncoming"}
 
 
-#: [m] another road's lane (or a junction's) whose centre line runs this close to the ego's way, at under 45 degrees to
-#: it, carries cars that :func:`party` counts beside the ego; measured: the interchange's one-lane exit ramp runs 4.8 m
+#: [m] another road's lane whose centre line runs this close to the ego's lane, at under 45 degrees to it, carries
+#: cars that :func:`party` counts beside the ego; measured: the interchange's one-lane exit ramp runs 4.8 m
 #: from the highway's lane beside it, and its campaigns met cars there 'behind left' (twentieth session)
 BESIDE_M = 6.0
 
 
 @lru_cache(maxsize=16)
 def _car_lanes(rmap) -> tuple[tuple[str, ...], tuple[LineString, ...], STRtree]:
-    """Every lane for cars (internal lanes too): ids, centre lines, and a tree over the lines."""
+    """Every lane for cars on a normal edge: ids, centre lines, and a tree over the lines."""
     ids, lines = [], []
     for e in rmap.net.getEdges(withInternal=False):
         for ln in e.getLanes():
@@ -669,7 +661,7 @@ def read_along(rmap, edge_id: str, next_id: str) -> frozenset[str]:
     on a roundabout's ring or in its junctions (there the classifier reads a car's heading and side against the
     ego's way where that car is). Each such path is read :data:`READ_BACK_M` m back from its nearest point, against
     the ego's line there: square to it, crossing from that side; against it, oncoming; within 45 degrees of it,
-    beside it on that side or in that rear quarter (a car coming onto the ring merges beside the ego). On the
+    beside it on that side, or behind it on its line (a car coming onto the ring merges in). On the
     roundabout's ways out the road in beside them runs the other way: a car there is oncoming, not crossing from
     the right as :func:`crossing_sides` reads the junction (until the twenty-first session, when the classifier read
     it against the ego's heading, still round the ring)."""
