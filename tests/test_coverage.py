@@ -227,7 +227,7 @@ def test_crossing_cars_are_offered_from_the_sides_whose_paths_meet_the_ego_s(off
 
 def test_a_road_beside_a_one_lane_ramp_offers_its_side(offered):
     """A car on another road that runs beside the ego's lane is read beside it (:func:`party`): the interchange's
-    one-lane exit ramp runs 4.8 m from the highway's lane on its left, and its campaigns met cars there in every
+    one-lane exit ramp leaves the highway's lane 4.2-6 m on its left, and its campaigns met cars there in every
     repetition (twentieth session) while the derivation offered sides only on a road of several lanes."""
     interchange = load_roadmap(ROOT / "networks" / "interchange.net.xml")
     assert beside_sides(interchange, "WBexit") == {"vehicle/left", "vehicle/rear_left"}

@@ -590,8 +590,8 @@ def crossing_sides(rmap, edge_id: str, next_id: str) -> frozenset[str]:
 
 
 #: [m] another road's lane whose centre line runs this close to the ego's lane, at under 45 degrees to it, carries
-#: cars that :func:`party` counts beside the ego; measured: the interchange's one-lane exit ramp runs 4.8 m
-#: from the highway's lane beside it, and its campaigns met cars there 'behind left' (twentieth session)
+#: cars that :func:`party` counts beside the ego; measured: the interchange's one-lane exit ramp leaves the
+#: highway's lane 4.2-6 m beside it, and its campaigns met cars there 'behind left' (twentieth session)
 BESIDE_M = 6.0
 
 
