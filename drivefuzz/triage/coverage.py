@@ -672,22 +672,31 @@ def read_along(rmap, edge_id: str, next_id: str) -> frozenset[str]:
     for e in node.getIncoming():
         if e.getID() == edge_id or not rmap.is_normal_edge(e) or not e.allows("passenger"):
             continue
-        for lane in e.getLanes():
-            if not lane.allows("passenger"):
-                continue
-            for c in lane.getOutgoing():
-                to = c.getToLane()
-                if not rmap.is_normal_edge(to.getEdge()) or to.getEdge().getToNode() is e.getFromNode():
+        for theirs in _paths_from(rmap, e.getID()):
+            for mine in ego:
+                if theirs.distance(mine) >= CONFLICT_M:
                     continue
-                theirs = _line(rmap, lane.getID(), to.getID(), c.getViaLaneID() or "")
-                for mine in ego:
-                    if theirs.distance(mine) >= CONFLICT_M:
-                        continue
-                    t0 = min(((theirs.project(mine.interpolate(d)), mine.interpolate(d).distance(theirs))
-                              for d in np.arange(0.0, mine.length, 1.0)), key=lambda x: x[1])[0]
-                    for back in READ_BACK_M:
-                        out.add(_read_at(mine, theirs, max(t0 - back, 0.0)))
+                t0 = min(((theirs.project(mine.interpolate(d)), mine.interpolate(d).distance(theirs))
+                          for d in np.arange(0.0, mine.length, 1.0)), key=lambda x: x[1])[0]
+                for back in READ_BACK_M:
+                    out.add(_read_at(mine, theirs, max(t0 - back, 0.0)))
     return frozenset(out)
+
+
+@lru_cache(maxsize=4096)
+def _paths_from(rmap, edge_id: str) -> tuple[LineString, ...]:
+    """The centre lines of the paths for cars from ``edge_id`` through the junction at its end (:func:`_line`),
+    U-turns left out."""
+    e = rmap.edge(edge_id)
+    out = []
+    for lane in e.getLanes():
+        if not lane.allows("passenger"):
+            continue
+        for c in lane.getOutgoing():
+            to = c.getToLane()
+            if rmap.is_normal_edge(to.getEdge()) and to.getEdge().getToNode() is not e.getFromNode():
+                out.append(_line(rmap, lane.getID(), to.getID(), c.getViaLaneID() or ""))
+    return tuple(out)
 
 
 def _read_at(mine: LineString, theirs: LineString, t: float) -> str:
@@ -727,21 +736,9 @@ def _approaches_near(rmap, edge_id: str, next_id: str) -> frozenset[str]:
             side = "vehicle/crossing_right" if dh > 0 else "vehicle/crossing_left"  # heads to the ego's left
         else:
             continue
-        if side in out:
-            continue
-        for lane in e.getLanes():
-            if not lane.allows("passenger"):
-                continue
-            for c in lane.getOutgoing():
-                to = c.getToLane()
-                if not rmap.is_normal_edge(to.getEdge()) or to.getEdge().getToNode() is e.getFromNode():
-                    continue
-                theirs = _line(rmap, lane.getID(), to.getID(), c.getViaLaneID() or "")
-                if any(theirs.distance(mine) < CONFLICT_M for mine in ego):
-                    out.add(side)
-                    break
-            if side in out:
-                break
+        if side not in out and any(theirs.distance(mine) < CONFLICT_M for theirs in _paths_from(rmap, e.getID())
+                                   for mine in ego):
+            out.add(side)
     return frozenset(out)
 
 
