@@ -87,8 +87,8 @@ def main(argv: list[str] | None = None) -> int:
         for actor, f in cov.close_encounters(risk):
             mine = [c for c in cov.classify(scenario, trace, rmap, actor, f).cells() if c in outside]
             if mine:
-                print(json.dumps({"scenario": scenario.content_hash(), **reading(scenario, trace, rmap, actor, f, mine)}),
-                      flush=True)
+                seen = reading(scenario, trace, rmap, actor, f, mine)
+                print(json.dumps({"scenario": scenario.content_hash(), **seen}), flush=True)
         return cells
 
     cov.execution_cells = watched  # the job imports it from the module when it runs
