@@ -403,7 +403,8 @@ def _phases(element: str) -> tuple[str, ...]:
 def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
     """Per route edge of every seed: its element at the end (``signal``, ``priority``, ``yield``; ``ramp`` or
     ``roundabout`` for such an edge; None for a plain edge's end), its turn there, the junction there (``node``),
-    whether it is multi-lane, its limit, and the parties that can meet the ego there."""
+    whether it is multi-lane, its limit, the parties that can meet the ego there, those met anywhere along the edge
+    (``along``: a road beside it) and the kind of road after the junction (``after``: edge, ramp, roundabout)."""
     feats = _features(rmap)
     out: list[dict[str, Any]] = []
     done: set[tuple[str, str, str]] = set()
