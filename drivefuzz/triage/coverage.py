@@ -451,7 +451,7 @@ def _route_places(rmap, scenarios: Iterable) -> list[dict[str, Any]]:
                 # before the way onto the ring, its traffic comes across from the other side too: 2 s before it comes
                 # round to meet the ego, a car on the ring's far side heads the other way across the ego's (the
                 # roundabout's 'from the right' in 3 of 5 campaigns of the twentieth session)
-                if link["crossing"]:
+                if link["crossing"]:  # (in place: base["parties"] is this set, so the yield line's places take both)
                     parties |= {"vehicle/crossing_left", "vehicle/crossing_right"}
             turns = sorted(link["turns"]) or [None]
             into = _into(rmap, eid, nxt, turns[0]) if turns[0] else set()  # a turn counts on the road it leads into
