@@ -147,7 +147,6 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random,
         m = m.model_copy(update={"start_pos": round(edge.getLength() - rng.uniform(*room), 2)})
         if _left_behind(mut, sc, m.start_pos):
             return None
-    sep = mut.cfg.min_separation + EGO_LENGTH / 2
     options = []
     for lane in edge.getLanes():
         lane_id = lane.getID()
@@ -158,9 +157,7 @@ def shifted_start(mut: Mutator, sc: Scenario, rng: random.Random,
         to = mut.ego_lane_at(new, 0, edge.getLength())
         if at is None or not rmap.may_change_to(lane_id, to):
             continue
-        x, y, _ = rmap.geom(lane_id).position(m.start_pos)
-        if any(math.hypot(x - ax, y - ay) < sep for ax, ay, _ in
-               (rmap.geom(a.start_lane).position(a.start_pos) for a in sc.actors)):
+        if not _ego_fits(mut, sc, lane_id, m.start_pos):
             continue
         options.append((new, lane_id))
     if not options:
@@ -181,14 +178,19 @@ def standing_start(mut: Mutator, sc: Scenario, rng: random.Random,
     if edge.getLength() - m.start_pos < room[1] or mut.lane_change_at(sc, 0) is not None:
         return None
     pos = round(edge.getLength() - rng.uniform(*room), 2)
-    sep = mut.cfg.min_separation + EGO_LENGTH / 2
-    x, y, _ = rmap.geom(m.start_lane).position(pos)
-    if _left_behind(mut, sc, pos) or any(math.hypot(x - ax, y - ay) < sep for ax, ay, _ in
-                                         (rmap.geom(a.start_lane).position(a.start_pos) for a in sc.actors)):
+    if _left_behind(mut, sc, pos) or not _ego_fits(mut, sc, m.start_lane, pos):
         return None
     new = sc.model_copy(update={"mission": m.model_copy(update={"start_pos": pos, "start_speed": 0.0})})
     return new, (f"the ego starts standing {edge.getLength() - pos:.0f} m before the end of {edge.getID()} (was "
                  f"{m.start_pos:.0f} m on, at {m.start_speed:.1f} m/s)")
+
+
+def _ego_fits(mut: Mutator, sc: Scenario, lane_id: str, pos: float) -> bool:
+    """Whether the ego started at ``pos`` [m] on ``lane_id`` keeps the separation from every actor's start."""
+    sep = mut.cfg.min_separation + EGO_LENGTH / 2
+    x, y, _ = mut.rmap.geom(lane_id).position(pos)
+    return all(math.hypot(x - ax, y - ay) >= sep for ax, ay, _ in
+               (mut.rmap.geom(a.start_lane).position(a.start_pos) for a in sc.actors))
 
 
 def _left_behind(mut: Mutator, sc: Scenario, pos: float) -> bool:

@@ -44,6 +44,7 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 from shapely import STRtree
 from shapely.geometry import LineString
+from shapely.ops import nearest_points
 
 from drivefuzz.search.episodes import GAP_M, PET_S, TTC_S  # the thresholds of a close encounter
 from drivefuzz.sim.world import sun_glare
@@ -229,9 +230,7 @@ def _has_lanes_beside(trace, rmap, f: int) -> bool:
     counted as one, and the roundabout's campaigns met cars in 'lane changes' that its one-lane roads cannot
     offer)."""
     lane = str(trace["lane"][frames_before(trace, f, WINDOW_S).start])
-    if not lane or lane.startswith(":") or not rmap.has_lane(lane):
-        return False
-    return sum(1 for ln in rmap.lane(lane).getEdge().getLanes() if ln.allows("passenger")) >= 2
+    return bool(lane) and not lane.startswith(":") and rmap.has_lane(lane) and _multilane(rmap.lane(lane).getEdge())
 
 
 def element(scenario, trace, rmap, f: int) -> str:
@@ -492,13 +491,18 @@ def _road_parties(edge) -> set[str]:
     """Who can be beside or come towards the ego on ``edge``: the sides and rear quarters on a road of several
     lanes for cars, oncoming cars where a road runs the other way, walkers where it has a pavement."""
     out = set()
-    if sum(1 for ln in edge.getLanes() if ln.allows("passenger")) >= 2:
+    if _multilane(edge):
         out |= {f"vehicle/{a}" for a in ("left", "right", "rear_left", "rear_right")}
     if _has_opposite(edge):
         out.add("vehicle/oncoming")
     if any(ln.allows("pedestrian") and not ln.allows("passenger") for ln in edge.getLanes()):
         out |= {f"pedestrian/{a}" for a in PEDESTRIAN_APPROACHES}
     return out
+
+
+def _multilane(edge) -> bool:
+    """Whether ``edge`` has two lanes for cars or more."""
+    return sum(1 for ln in edge.getLanes() if ln.allows("passenger")) >= 2
 
 
 def _has_opposite(edge) -> bool:
@@ -548,6 +552,11 @@ def _line(rmap, frm: str, to: str, via: str) -> LineString:
     g = rmap.geom(to)
     pts = _tail(rmap, frm) + [p for lid in rmap.internal_chain(via) for p in rmap.geom(lid).pts]
     pts += [p for p in g.pts[g.cum < 15.0]] + [g.position(min(15.0, g.length))[:2]]
+    return _polyline(pts)
+
+
+def _polyline(pts) -> LineString:
+    """A line through the (x, y) of ``pts``."""
     return LineString([tuple(map(float, p[:2])) for p in pts])
 
 
@@ -572,7 +581,7 @@ def oncoming_into(rmap, edge_id: str, next_id: str) -> bool:
             continue
         for lane in o.getLanes():
             if lane.allows("passenger"):
-                end = LineString([tuple(map(float, p[:2])) for p in _tail(rmap, lane.getID())])
+                end = _polyline(_tail(rmap, lane.getID()))
                 if any(end.distance(m) < CONFLICT_M for m in ego):
                     return True
     return "vehicle/oncoming" in _approaches_near(rmap, edge_id, next_id)
@@ -604,7 +613,7 @@ def _car_lanes(rmap) -> tuple[tuple[str, ...], tuple[LineString, ...], STRtree]:
         for ln in e.getLanes():
             if ln.allows("passenger") and rmap.is_normal_edge(e):
                 ids.append(ln.getID())
-                lines.append(LineString([tuple(map(float, p)) for p in rmap.geom(ln.getID()).pts]))
+                lines.append(_polyline(rmap.geom(ln.getID()).pts))
     return tuple(ids), tuple(lines), STRtree(lines)
 
 
@@ -623,7 +632,7 @@ def beside_sides(rmap, edge_id: str, last_m: float | None = None) -> frozenset[s
             g = rmap.geom(ln.getID())
             pts = g.pts if last_m is None else [g.position(max(g.length - last_m, 0.0))[:2]] + list(
                 g.pts[g.cum > g.length - last_m])
-            mine.append(LineString([tuple(map(float, p)) for p in pts]))
+            mine.append(_polyline(pts))
     own = {ln.getID() for ln in edge.getLanes()}  # and the lanes it continues from and into: the ego's own way
     own |= {c.getToLane().getID() for ln in edge.getLanes() for c in ln.getOutgoing()}
     own |= {c.getFromLane().getID() for e in edge.getIncoming() for c in e.getConnections(edge)}
@@ -632,15 +641,13 @@ def beside_sides(rmap, edge_id: str, last_m: float | None = None) -> frozenset[s
     for way in mine:
         near = [i for i in tree.query(way, predicate="dwithin", distance=BESIDE_M) if ids[i] not in own]
         for d in np.arange(0.0, way.length, 2.0):
-            p, q = way.interpolate(d), way.interpolate(min(d + 1.0, way.length))
-            h = math.atan2(q.y - p.y, q.x - p.x)
+            p, h = way.interpolate(d), _heading_at(way, d + 0.5)
             for i in near:
                 other = lines[i]
                 if not SAME_LANE_M <= other.distance(p) <= BESIDE_M:
                     continue
                 t = other.project(p)
-                a, b = other.interpolate(max(t - 0.5, 0.0)), other.interpolate(min(t + 0.5, other.length))
-                if abs(wrap_angle(math.atan2(b.y - a.y, b.x - a.x) - h)) >= math.pi / 4:
+                if abs(wrap_angle(_heading_at(other, t) - h)) >= math.pi / 4:
                     continue
                 c = other.interpolate(t)
                 side = "left" if math.cos(h) * (c.y - p.y) - math.sin(h) * (c.x - p.x) > 0 else "right"
@@ -677,8 +684,7 @@ def read_along(rmap, edge_id: str, next_id: str) -> frozenset[str]:
             for mine in ego:
                 if theirs.distance(mine) >= CONFLICT_M:
                     continue
-                t0 = min(((theirs.project(mine.interpolate(d)), mine.interpolate(d).distance(theirs))
-                          for d in np.arange(0.0, mine.length, 1.0)), key=lambda x: x[1])[0]
+                t0 = theirs.project(nearest_points(theirs, mine)[0])
                 for back in READ_BACK_M:
                     out.add(_read_at(mine, theirs, max(t0 - back, 0.0)))
     return frozenset(out)
@@ -702,12 +708,9 @@ def _paths_from(rmap, edge_id: str) -> tuple[LineString, ...]:
 
 def _read_at(mine: LineString, theirs: LineString, t: float) -> str:
     """The party a car at ``t`` m along ``theirs`` is against the ego's way ``mine`` (:func:`party`)."""
-    p, q = theirs.interpolate(t), theirs.interpolate(min(t + 1.0, theirs.length))
-    h = math.atan2(q.y - p.y, q.x - p.x)
+    p, h = theirs.interpolate(t), _heading_at(theirs, t + 0.5)
     u = mine.project(p)
-    a, b = mine.interpolate(max(u - 0.5, 0.0)), mine.interpolate(min(u + 0.5, mine.length))
-    way = math.atan2(b.y - a.y, b.x - a.x)
-    c = mine.interpolate(u)
+    way, c = _heading_at(mine, u), mine.interpolate(u)
     side = "left" if math.cos(way) * (p.y - c.y) - math.sin(way) * (p.x - c.x) > 0 else "right"
     dh = abs(wrap_angle(h - way))
     if dh >= 3 * math.pi / 4:
@@ -715,6 +718,12 @@ def _read_at(mine: LineString, theirs: LineString, t: float) -> str:
     if dh > math.pi / 4:
         return f"vehicle/crossing_{side}"
     return f"vehicle/{side}" if c.distance(p) >= SAME_LANE_M else "vehicle/behind"
+
+
+def _heading_at(line: LineString, t: float) -> float:
+    """[rad] the heading of ``line`` over the metre around ``t`` m along it (cut at its ends)."""
+    a, b = line.interpolate(max(t - 0.5, 0.0)), line.interpolate(min(t + 0.5, line.length))
+    return math.atan2(b.y - a.y, b.x - a.x)
 
 
 def _approaches_near(rmap, edge_id: str, next_id: str) -> frozenset[str]:
