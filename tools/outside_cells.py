@@ -11,6 +11,7 @@ such execution is kept under ``--keep`` to be replayed. Usage::
 
     python tools/eval_coverage.py --from-dump N.json                         # which cells, in which repetitions
     python tools/outside_cells.py --network roundabout --rep 4 --execs 1000 --keep /tmp/outside
+    python tools/outside_cells.py --network town --rep 0 --cells "vehicle/right|turn_right"   # a derived cell too
 
 Prints only; a measurement, not a test.
 """
@@ -57,6 +58,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rep", type=int, default=0, help="the repetition (the campaign's seed) [0]")
     ap.add_argument("--execs", type=int, default=1000, help="executions [1000]")
     ap.add_argument("--keep", default="", help="a folder for the scenarios of the executions that land outside")
+    ap.add_argument("--cells", default="", help="comma-separated cell keys (or parts of them) to print too, derived "
+                                                "or not: how a rare cell was read")
     args = ap.parse_args(argv)
 
     import drivefuzz.triage.coverage as cov
@@ -67,6 +70,7 @@ def main(argv: list[str] | None = None) -> int:
 
     seeds = [read_scenario(p) for p in list_seeds(REPO / "seeds" / args.network)]
     derived: set[str] = set()
+    watch = [w for w in args.cells.split(",") if w]
     count = [0, 0]
     classify_cells = cov.execution_cells
 
@@ -78,7 +82,7 @@ def main(argv: list[str] | None = None) -> int:
             return cells
         if not derived:
             derived.update(cov.reachable(rmap, seeds))
-        outside = {c for c in cells if c not in derived}
+        outside = {c for c in cells if c not in derived or any(w in c for w in watch)}
         if not outside:
             return cells
         count[1] += 1

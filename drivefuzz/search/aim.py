@@ -54,8 +54,8 @@ from drivefuzz.search.fairness import lane_limit
 from drivefuzz.search.aim_place import (FOLLOW_TURN_CLOSE_S, GRIP_ACCEL_LENGTH_M, GRIP_START_BEHIND_M,
                                         GRIP_START_LENGTH_M, GRIP_START_MU, JUNCTION_COLUMNS,
                                         LATE_CHANGE_CLEARS_S, LATE_CHANGE_ROOM_M, STANDING_CROSS_ROOM_M,
-                                        START_SPOTS_M, drawn_level, follower_at, grip_at, into_lane, lane_change_moves,
-                                        meeting, passes, profile_spots, shift_light, shifted_start, standing_start,
+                                        START_SPOTS_M, beside_ramp, drawn_level, follower_at, grip_at, into_lane, lane_change_moves,
+                                        meeting, passes, profile_spots, road_beside, shift_light, shifted_start, standing_start,
                                         started_at_speed, stopped_on_ring, stopped_past, walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 
@@ -357,6 +357,10 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
         turn = FOLLOW_TURN_CLOSE_S if col in ("turn_left", "turn_right") else None
         return [Situation("follower", "", follower if at is None else partial(follower_at, at=at,
                                                                                 close_after_s=turn))]
+    if approach in ("left", "right", "rear_left", "rear_right") and col in ("ramp", "merge") \
+            and road_beside(mut, sc, side):  # on the road beside a one-lane ramp
+        return [Situation("passes" if approach.startswith("rear") else "drawn_level", "",
+                          partial(beside_ramp, side=side, rear=approach.startswith("rear")))]
     if approach in ("left", "right") and col in ("turn_left", "turn_right") and at is not None:
         return [Situation("stopped_past", "", partial(stopped_past, at=at, side=side))]
     if approach in ("left", "right") and (col.startswith("signal/") or col == "stop_go") and at is not None:
@@ -368,8 +372,9 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
         return [_filtered(s, keep) for s in (*prog.PROGRAMS, *cat.SITUATIONS, Situation(
                     "drawn_level", "", partial(drawn_level, at=at, side=side)))
                 if s.name in ("aborted_lane_change", "cut_in", "squeeze", "drawn_level")]
-    if approach in ("rear_left", "rear_right"):  # from behind on the lane beside, passing close by
-        return [_filtered(Situation("passes", "", partial(passes, at=at, side=side)), partial(_on_side, mut, sc, side))]
+    if approach in ("rear_left", "rear_right"):  # from behind on the lane beside, passing close by (passes picks
+        # the side's lane itself, and a run-up may start off the route: through the junction, past a turn)
+        return [Situation("passes", "", partial(passes, at=at, side=side))]
     if approach == "oncoming":
         if col == "lane_change" and at is not None:  # level just after the change (nearest an ego that moved left)
             at += ONCOMING_AFTER_CHANGE_M

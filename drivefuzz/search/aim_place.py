@@ -684,3 +684,116 @@ def walker_from_left(mut: Mutator, sc: Scenario, rng: random.Random, early=(-1.0
                 return None
             return [new], [], {}, f"{new.id} crosses from the left from {sw.getID()} @ {pos:.1f} m, leaving at {new.depart} s"
     return None
+
+
+def road_beside(mut: Mutator, sc: Scenario, side: str | None) -> list[tuple[float, float, str, float]]:
+    """Where another road's lane for cars runs beside the ego's on the route's ramps (a one-lane ramp has no lane
+    beside of its own: the highway beside an on-ramp or an exit ramp, :func:`drivefuzz.triage.coverage.beside_sides`):
+    (centre-line distance [m], route distance [m], that lane, the position [m] on it level with the ego), every 2 m,
+    on ``side`` (``left``, ``right``; None: either). Cached per mission."""
+    key = (sc.mission.start_edge, sc.mission.start_pos, sc.mission.goal_edge, side)
+    cache = mut.__dict__.setdefault("_road_beside", {})
+    if key not in cache:
+        cache[key] = _road_beside(mut, sc, side)
+    return cache[key]
+
+
+def _road_beside(mut: Mutator, sc: Scenario, side: str | None) -> list[tuple[float, float, str, float]]:
+    from drivefuzz.search.aim import _marks
+    from drivefuzz.triage.coverage import BESIDE_M, SAME_LANE_M, _car_lanes, _heading_at, wrap_angle
+    from shapely.geometry import Point
+
+    route = set(mut._route(sc))
+    ids, lines, tree = _car_lanes(mut.rmap)
+    out = []
+    for s0, s1 in _marks(mut, sc)["ramps"]:
+        for d in np.arange(max(s0, 0.0) + 1.0, s1 - 0.5, 2.0):
+            spot = cat._route_spot(mut, sc, float(d))
+            if spot is None:
+                continue
+            x, y, h = mut.rmap.geom(spot[1]).position(spot[2])
+            p = Point(x, y)
+            for i in tree.query(p, predicate="dwithin", distance=BESIDE_M):
+                if mut.rmap.lane(ids[i]).getEdge().getID() in route:  # the ego's own way
+                    continue
+                other = lines[i]
+                gap = other.distance(p)
+                t = other.project(p)
+                if gap < SAME_LANE_M or abs(wrap_angle(_heading_at(other, t) - h)) >= math.pi / 4:
+                    continue
+                c = other.interpolate(t)
+                on = "left" if math.cos(h) * (c.y - y) - math.sin(h) * (c.x - x) > 0 else "right"
+                if side in (None, on):
+                    out.append((round(gap, 2), float(d), ids[i], round(t, 2)))
+    return out
+
+
+#: [m] over the nearest another road's lane comes to the ego's on a ramp that a car there is placed to meet it
+BESIDE_RAMP_SLACK_M = 0.5
+#: [m] before a ramp's end that a car beside it is level with the ego at the latest: the closest moment comes a little
+#: after that, and met at the very end it was on the road after the ramp (``rear_left|cruise``, not ``|merge``)
+BESIDE_RAMP_END_M = 14.0
+
+
+def beside_ramp(mut: Mutator, sc: Scenario, rng: random.Random, side: str, rear: bool = False):
+    """A car on the road beside a one-lane ramp of the route (:func:`road_beside`), level with the ego where that
+    road comes nearest the ramp (the end of an on-ramp, the start of an exit ramp: 3.7-4.5 m between the centre
+    lines on the interchange and the highway), drifting towards it inside its own lane there (:func:`drift`'s body
+    gap); ``rear``: from behind and faster, level with the ego's rear there (2 s before, in its rear quarter), else
+    at the ego's speed, beside it. Until the twenty-second session nothing placed a car there: the side cells on a
+    ramp (``left|ramp``, ``rear_left|merge``) were reached only where the traffic happened to be there."""
+    from drivefuzz.search.aim import _marks
+
+    ends = [s1 for _, s1 in _marks(mut, sc)["ramps"]]  # the encounter dated on the ramp, not just past its end
+    spots = road_beside(mut, sc, side)
+    early = [s for s in spots if not any(e - BESIDE_RAMP_END_M < s[1] <= e for e in ends)]
+    if not spots:
+        return None
+    if early:  # the nearest of them
+        nearest = min(g for g, *_ in early)
+        gap, d, lane_id, t = rng.choice([s for s in early if s[0] <= nearest + BESIDE_RAMP_SLACK_M])
+    else:  # a road beside only the ramp's last metres (the highway's on-ramp): the first of them
+        gap, d, lane_id, t = min(spots, key=lambda s: s[1])
+    v_ego = prog._ego_speed(mut, sc, d)
+    if v_ego < 2.0:
+        return None
+    top = prog.SPEED_SHARE[1] * lane_limit(mut, lane_id)
+    if rear:
+        speed = round(min(top, v_ego + rng.uniform(3.0, 7.0)), 2)
+        front = t - EGO_LENGTH  # its front at the ego's rear
+    else:
+        speed = round(min(top, v_ego * rng.uniform(0.95, 1.05)), 2)
+        front = t + (NPC_LENGTH - EGO_LENGTH) / 2.0  # the centres abreast
+    t_level = mut._ego_eta(sc, d)
+    placed = run_up(mut, lane_id, max(front, 0.5), speed, rng.uniform(3.0, 7.0), t_level, rng)
+    if placed is None:
+        return None
+    start_lane, start, depart = placed
+    lane = mut.rmap.lane(lane_id)
+    apart = gap - (NPC_WIDTH + EGO_WIDTH) / 2.0  # the body gap, both centred
+    depth = math.floor(100.0 * min(max(apart - rng.uniform(*DRIFT_GAP), 0.1), drift_room(lane.getWidth()))) / 100.0
+    steps = []
+    if depth >= 0.1:
+        steps.append(Maneuver(time=0.5, action=ManeuverAction.NUDGE_RIGHT if side == "left" else
+                              ManeuverAction.NUDGE_LEFT, value=round(rng.uniform(*DRIFT_S), 2), trigger=Trigger.PEAK,
+                              depth=depth, at=round(-(EGO_LENGTH + NPC_LENGTH) / 2.0 + rng.uniform(-1.0, 1.0), 1)))
+    a = prog._vehicle(mut, sc, mut.rmap.lane(start_lane), start, speed, depart, steps)
+    a = a.model_copy(update={"dest_edge": _onward(mut, lane_id)})  # its own road's way on, not the ego's goal
+    if not mut.rmap.route(mut.rmap.lane(start_lane).getEdge().getID(), a.dest_edge):
+        return None
+    how = "passes the ego from behind" if rear else "drives beside the ego"
+    return [a], [], {}, (f"{a.id} {how} on {lane_id} beside the ramp at {speed:.1f} m/s, level with it at {d:.0f} m "
+                         f"({t_level:.1f} s)" + (f", drifting {depth} m towards it" if steps else ""))
+
+
+def _onward(mut: Mutator, lane_id: str, hops: int = 2) -> str:
+    """The edge ``hops`` links on from ``lane_id``'s edge, by its lane's first link to a normal edge each time (or
+    as far as there is one): a destination past the place where a car on it meets the ego."""
+    lane = mut.rmap.lane(lane_id)
+    for _ in range(hops):
+        nxt = next((c.getToLane() for c in lane.getOutgoing() if mut.rmap.is_normal_edge(c.getToLane().getEdge())
+                    and c.getToLane().allows(PASSENGER)), None)
+        if nxt is None:
+            break
+        lane = nxt
+    return lane.getEdge().getID()
