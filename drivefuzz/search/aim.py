@@ -374,7 +374,7 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
                 if s.name in ("aborted_lane_change", "cut_in", "squeeze", "drawn_level")]
     if approach in ("rear_left", "rear_right"):  # from behind on the lane beside, passing close by (passes picks
         # the side's lane itself, and a run-up may start off the route: through the junction, past a turn)
-        return [Situation("passes", "", partial(passes, at=at, side=side))]
+        return [_filtered(Situation("passes", "", partial(passes, at=at, side=side)), partial(_on_side, mut, sc, side))]
     if approach == "oncoming":
         if col == "lane_change" and at is not None:  # level just after the change (nearest an ego that moved left)
             at += ONCOMING_AFTER_CHANGE_M

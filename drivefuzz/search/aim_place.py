@@ -758,17 +758,22 @@ def beside_ramp(mut: Mutator, sc: Scenario, rng: random.Random, side: str, rear:
     if v_ego < 2.0:
         return None
     top = prog.SPEED_SHARE[1] * lane_limit(mut, lane_id)
-    if rear:
-        speed = round(min(top, v_ego + rng.uniform(3.0, 7.0)), 2)
+    t_level, lead = mut._ego_eta(sc, d), rng.uniform(3.0, 7.0)
+    if rear:  # faster than the ego over the run-up (it slows on the ramp: at its speed at the place it came from
+        # ahead, and the ego met it from behind), so that it starts behind the ego
+        lead = min(lead, t_level)
+        over = (d - mut._ego_progress(sc, t_level - lead)) / max(lead, 0.1)
+        speed = round(min(top, max(v_ego, over) + rng.uniform(3.0, 7.0)), 2)
         front = t - EGO_LENGTH  # its front at the ego's rear
     else:
         speed = round(min(top, v_ego * rng.uniform(0.95, 1.05)), 2)
         front = t + (NPC_LENGTH - EGO_LENGTH) / 2.0  # the centres abreast
-    t_level = mut._ego_eta(sc, d)
-    placed = run_up(mut, lane_id, max(front, 0.5), speed, rng.uniform(3.0, 7.0), t_level, rng)
+    placed = run_up(mut, lane_id, max(front, 0.5), speed, lead, t_level, rng)
     if placed is None:
         return None
     start_lane, start, depart = placed
+    if mut.rmap.lane(start_lane).getEdge().getID() in mut._route(sc):  # run up on the ego's own way: a follower
+        return None
     lane = mut.rmap.lane(lane_id)
     apart = gap - (NPC_WIDTH + EGO_WIDTH) / 2.0  # the body gap, both centred
     depth = math.floor(100.0 * min(max(apart - rng.uniform(*DRIFT_GAP), 0.1), drift_room(lane.getWidth()))) / 100.0
