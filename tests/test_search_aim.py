@@ -330,6 +330,25 @@ def test_a_job_aims_first_at_the_cells_no_other_job_has_reached():
     assert aim_cells([a, b, c], set(), {}, own=[a]) == aim_cells([a, b, c], set(), {}, own=[a], elsewhere=()) == [a]
 
 
+def test_a_cell_another_job_gave_up_on_becomes_the_job_s_own_where_its_mission_can_build_it(tmp_path):
+    """A job that missed a cell AIM_MISSES times gives it up; in their later lineages the other jobs whose seeds
+    offer it and can build it take it into their share (aimed at first while nobody has reached it), the others do
+    not; a peer's misses in the lineage a job is in do not count yet (the view is of finished lineages)."""
+    from drivefuzz.campaign.aiming import AIM_MISSES, PeerView
+
+    a, b, c = "party-element:vehicle/ahead|edge", "party-manoeuvre:vehicle/behind|brake", "speed-condition:0-10 km/h|fog"
+    journal = tmp_path / "peer.jsonl"
+    rec = {"event": "end", "lineage": 0, "cells": [b], "mutation": f"aim {a}: situation lead_slower: v0 ahead"}
+    late = dict(rec, lineage=1, mutation=f"aim {c}: situation grip")
+    journal.write_text("".join(json.dumps(r) + "\n" for r in [rec] * AIM_MISSES + [late] * AIM_MISSES))
+    view = PeerView([journal])
+    assert view.given_up(0) == frozenset() and view.given_up(1) == {a} and view.given_up(2) == {a, c}
+    assert view.reached(1) == {b}
+    assert aim_cells([a, b, c], set(), {}, own=[b], handed=view.given_up(1)) == [a, b]
+    assert aim_cells([a, b, c], set(), {}, own=[b], handed={a}, can=lambda cell: cell != a) == [b]
+    assert aim_cells([b, c], set(), {}, own=[b], handed={a}) == [b]  # a cell its seed does not offer
+
+
 def test_a_job_sees_what_the_others_reached_in_their_earlier_lineages_only(tmp_path):
     """The view of the other jobs' cells is a pure function of their finished lineages: nothing in a job's first
     lineage, then their seed runs and the lineages before its own; a line still being written (no newline yet) and

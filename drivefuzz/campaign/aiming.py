@@ -116,7 +116,7 @@ def can_aim(rmap, seed_sc, cell: str, index: int) -> bool:
 
 
 def aim_cells(reach, reached, misses: dict[str, int], own=(), elsewhere=(),
-              can: Callable[[str], bool] | None = None) -> list[str]:
+              can: Callable[[str], bool] | None = None, handed=()) -> list[str]:
     """The cells a job aims at: its share of the campaign's cells (``own``, :func:`share_cells`) not reached yet
     by it; when it has reached them all, its seed's other reachable cells not reached yet. Less, in both, those
     its aimed builds have missed :data:`AIM_MISSES` times (the aims spread over the others), and every lane-change
@@ -132,7 +132,11 @@ def aim_cells(reach, reached, misses: dict[str, int], own=(), elsewhere=(),
     on its mission: an aim it cannot build becomes an ordinary mutation. Without ``elsewhere`` (a job's first
     lineage) the order is the one before: its share, then its seed's others."""
     unreached = [c for c in reach if c not in reached]
-    own = set(own)
+    # a cell another job gave up on (``handed``: :meth:`PeerView.given_up`) becomes this job's too where its seed
+    # offers it and the mutator can build it on its mission: its holder's mission may offer it only in a form that
+    # no aim meets (the interchange's car from the left at amber, held by seed 004: 0 of 4 lab draws met it there, 3
+    # of 7 on seeds 001 and 007, which aimed at it once a campaign)
+    own = set(own) | {c for c in handed if c in reach and (can is None or can(c))}
     # a start on another lane makes any ADS change lanes, but each such cell it misses costs an execution: past
     # AIM_MISSES of them the job leaves the lane-change cells (the shifted start on town's five seeds without a lane
     # change of their own cost finding power: crossing_left_blind in 5 of 10 campaigns, 4 of 5 without any shifted
@@ -161,11 +165,33 @@ class PeerView:
         self.journals = journals
         self._offsets = [0] * len(journals)
         self._by_lineage: dict[int, set[str]] = {}
+        self._misses: dict[int, list[dict[str, int]]] = {}  # per lineage, per peer: its aims that missed, by cell
 
     def reached(self, lineage: int) -> frozenset[str]:
         """The cells the peers reached in their lineages before ``lineage`` (none for lineage 0)."""
         if lineage <= 0:
             return frozenset()
+        self._read()
+        return frozenset().union(*(cells for n, cells in self._by_lineage.items() if n < lineage))
+
+    def given_up(self, lineage: int) -> frozenset[str]:
+        """The cells a peer stopped aiming at in its lineages before ``lineage``: its aimed builds missed each
+        :data:`AIM_MISSES` times (none for lineage 0). Another seed's mission may offer such a cell in a form its
+        aims hit (:func:`aim_cells` takes them into the job's share)."""
+        if lineage <= 0:
+            return frozenset()
+        self._read()
+        out: set[str] = set()
+        for k in range(len(self.journals)):
+            total: dict[str, int] = {}
+            for n, per_peer in self._misses.items():
+                if n < lineage:
+                    for cell, count in per_peer[k].items():
+                        total[cell] = total.get(cell, 0) + count
+            out |= {c for c, count in total.items() if count >= AIM_MISSES and ":" in c}
+        return frozenset(out)
+
+    def _read(self) -> None:
         for k, path in enumerate(self.journals):
             recs, self._offsets[k] = read_new_lines(path, self._offsets[k])
             for rec in recs:
@@ -173,7 +199,9 @@ class PeerView:
                         and isinstance(rec.get("cells"), list):
                     self._by_lineage.setdefault(rec["lineage"], set()).update(
                         c for c in rec["cells"] if isinstance(c, str))
-        return frozenset().union(*(cells for n, cells in self._by_lineage.items() if n < lineage))
+                    if isinstance(rec.get("mutation"), str):
+                        per_peer = self._misses.setdefault(rec["lineage"], [{} for _ in self.journals])
+                        count_misses(per_peer[k], [rec])
 
 
 def count_misses(misses: dict[str, int], recs: list[dict[str, Any]]) -> None:

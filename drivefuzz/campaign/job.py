@@ -36,8 +36,9 @@ Files of job ``NNN`` (the seed index) under ``jobs/NNN/``::
                       (two fsyncs per execution cost 5 % of a campaign's time): a power cut
                       loses at most the current cycle's records, whose executions a resume
                       runs again with the same results; under guided feedback, at the start of
-                      each lineage after the first, {"event": "peers", lineage, cells}: what the
-                      other jobs had reached (campaign.aiming.PeerView), which a resume reads back
+                      each lineage after the first, {"event": "peers", lineage, cells, given_up}:
+                      what the other jobs had reached and the cells they had given up aiming at
+                      (campaign.aiming.PeerView), which a resume reads back
     checkpoint.json   the schedule (corpus, the current lineage) and the seed's baseline risk (atomic)
     summary.json      written last, when the job has finished its seed: the DONE marker
     owner             the attempt that owns the job: an older attempt that is still running
@@ -79,6 +80,7 @@ from drivefuzz.scenario.sumofiles import load_scenario, write_scenario
 STOP_FILE = "STOP"
 #: the journal's record of what the other jobs had reached when a lineage began (:class:`PeerView`)
 PEERS = "peers"
+HANDED = "given_up"  #: the key of a peers record that lists the cells the other jobs gave up on
 #: the campaign's cells shared among its seed jobs (campaign.aiming.share_cells), written by the first job
 SHARES_FILE = "aim_shares.json"
 #: Draws of a population member that repeats (in effect) an execution of its job, its parent or a sibling
@@ -144,6 +146,7 @@ class SeedJob:
         self.journal = self.dir / "journal.jsonl"
         self.findings: list[str] = []
         self.views: dict[int, frozenset[str]] = {}  # per lineage: the other jobs' cells it aims past (PeerView)
+        self.handed: dict[int, frozenset[str]] = {}  # per lineage: the cells the other jobs gave up on (PeerView)
 
     # ---------------------------------------------------------------- files
     def _owned(self) -> bool:
@@ -219,7 +222,7 @@ class SeedJob:
         atomic_write_text(self.dir / "owner", self.token)
         history = read_journal(self.journal)
         done = {r["key"]: r for r in history if r.get("event") == "end"}
-        self.views = peer_views(history)
+        self.views, self.handed = peer_views(history), peer_views(history, HANDED)
         attempts = sum(1 for r in history if r.get("event") == "attempt") + 1
         _append(self.journal, {"event": "attempt", "pid": os.getpid(), "resumed_from": len(done),
                                "host": os.uname().nodename, "time": time.time(), "run": self.run_id}, after_kill=True,
@@ -315,7 +318,8 @@ class SeedJob:
             members: list[tuple[dict[str, Any], Any]] = []
             seen = {effect_hash(parent)}
             elsewhere = self._elsewhere(peers, lin.number) if peers is not None else ()
-            aim = aim_cells(reach, schedule.cells, misses, own, elsewhere, buildable)  # its unreached cells
+            handed = self.handed.get(lin.number, ())  # (recorded with the view)
+            aim = aim_cells(reach, schedule.cells, misses, own, elsewhere, buildable, handed)  # its unreached cells
             for member in range(cfg.population):
                 t0 = time.perf_counter()
                 key = f"{self.si}/{lin.number}/{lin.cycle}/{member}"
@@ -384,9 +388,10 @@ class SeedJob:
         resumed job aims as the first run did), else read now and recorded before its first execution."""
         if lineage not in self.views:
             self.views[lineage] = peers.reached(lineage)
+            self.handed[lineage] = peers.given_up(lineage)
             if lineage > 0:
                 _append(self.journal, {"event": PEERS, "lineage": lineage, "cells": sorted(self.views[lineage]),
-                                       "pid": os.getpid()})
+                                       HANDED: sorted(self.handed[lineage]), "pid": os.getpid()})
         return self.views[lineage]
 
     def _peer_view(self) -> PeerView:
@@ -482,14 +487,17 @@ class SeedJob:
         rec["runs"], rec["sim_s"] = runner.runs - runs0, round(runner.sim_s - sim0, 3)
 
 
-def peer_views(history: list[dict[str, Any]]) -> dict[int, frozenset[str]]:
+def peer_views(history: list[dict[str, Any]], key: str = "cells") -> dict[int, frozenset[str]]:
     """The other jobs' cells each lineage of a job aimed past, by lineage, as its journal recorded them (a record
-    that is not one is skipped: the lineage's view is read again)."""
+    that is not one is skipped: the lineage's view is read again); with ``key`` :data:`HANDED`, the cells they had
+    given up on (none where a journal of an older version did not record them)."""
     views: dict[int, frozenset[str]] = {}
     for r in history:
         if r.get("event") == PEERS and isinstance(r.get("lineage"), int) and isinstance(r.get("cells"), list) \
                 and all(isinstance(c, str) for c in r["cells"]):
-            views.setdefault(r["lineage"], frozenset(r["cells"]))
+            got = r.get(key, [])
+            views.setdefault(r["lineage"], frozenset(got) if isinstance(got, list) and all(
+                isinstance(c, str) for c in got) else frozenset())
     return views
 
 
