@@ -972,8 +972,8 @@ def test_a_car_aimed_beside_a_one_lane_ramp_drives_on_the_road_beside_it_and_mee
     """A one-lane ramp has no lane beside of its own; the road beside it (the highway beside the interchange's
     on-ramps) does. A car aimed at a side of the ego on a ramp drives there, off the ego's way, level with the ego
     (or passing it from behind) where that road runs nearest the ramp, fairly, and the one level with it meets the
-    ego on the ramp from that side in some draws (before, nothing placed a car there: ``rear_left|merge`` was aimed at 19
-    times in five interchange campaigns and met in none)."""
+    ego on the ramp from that side in some draws (before, nothing placed a car there: ``rear_left|merge`` was aimed
+    at 19 times in five interchange campaigns and met in none)."""
     from drivefuzz.scenario.seed import list_seeds
     from drivefuzz.scenario.sumofiles import read_scenario
     from drivefuzz.search.aim_place import beside_ramp, road_beside

@@ -71,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     seeds = [read_scenario(p) for p in list_seeds(REPO / "seeds" / args.network)]
     derived: set[str] = set()
     watch = [w for w in args.cells.split(",") if w]
-    count = [0, 0]
+    count = [0, 0, 0]  # executions; with a cell outside the derivation; with a watched derived cell
     classify_cells = cov.execution_cells
 
     def watched(scenario, trace, rmap, risk, near=False):
@@ -85,7 +85,8 @@ def main(argv: list[str] | None = None) -> int:
         outside = {c for c in cells if c not in derived or any(w in c for w in watch)}
         if not outside:
             return cells
-        count[1] += 1
+        count[1] += any(c not in derived for c in outside)
+        count[2] += any(c in derived for c in outside)
         if args.keep:
             write_scenario(scenario, Path(args.keep) / scenario.content_hash())
         for actor, f in cov.close_encounters(risk):
@@ -100,7 +101,8 @@ def main(argv: list[str] | None = None) -> int:
                      ads=AdsSpec(name="ego", options={}), reproduce=0, shrink=0)
     with tempfile.TemporaryDirectory(prefix="outside-cells-") as tmp:
         Campaign(Path(tmp) / "out", seeds, cfg).run()
-    print(f"{args.network} rep {args.rep}: {count[1]} of {count[0]} executions reached a cell outside the derivation")
+    print(f"{args.network} rep {args.rep}: {count[1]} of {count[0]} executions reached a cell outside the derivation"
+          + (f", {count[2]} one of the watched cells (--cells)" if watch else ""))
     return 0
 
 

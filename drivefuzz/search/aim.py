@@ -54,9 +54,10 @@ from drivefuzz.search.fairness import lane_limit
 from drivefuzz.search.aim_place import (FOLLOW_TURN_CLOSE_S, GRIP_ACCEL_LENGTH_M, GRIP_START_BEHIND_M,
                                         GRIP_START_LENGTH_M, GRIP_START_MU, JUNCTION_COLUMNS,
                                         LATE_CHANGE_CLEARS_S, LATE_CHANGE_ROOM_M, STANDING_CROSS_ROOM_M,
-                                        START_SPOTS_M, beside_ramp, drawn_level, follower_at, grip_at, into_lane, lane_change_moves,
-                                        meeting, passes, profile_spots, road_beside, shift_light, shifted_start, standing_start,
-                                        started_at_speed, stopped_on_ring, stopped_past, walker_from_left)
+                                        START_SPOTS_M, beside_ramp, drawn_level, follower_at, grip_at, into_lane,
+                                        lane_change_moves, meeting, passes, profile_spots, road_beside, shift_light,
+                                        shifted_start, standing_start, started_at_speed, stopped_on_ring, stopped_past,
+                                        walker_from_left)
 from drivefuzz.search.mutate import Mutation, Mutator
 
 #: [m] past the place where the ego stops (a light's stop line: before it) that a car beside it stands, its front
@@ -372,8 +373,7 @@ def _party_builders(mut: Mutator, sc: Scenario, party: str, col: str, at: float 
         return [_filtered(s, keep) for s in (*prog.PROGRAMS, *cat.SITUATIONS, Situation(
                     "drawn_level", "", partial(drawn_level, at=at, side=side)))
                 if s.name in ("aborted_lane_change", "cut_in", "squeeze", "drawn_level")]
-    if approach in ("rear_left", "rear_right"):  # from behind on the lane beside, passing close by (passes picks
-        # the side's lane itself, and a run-up may start off the route: through the junction, past a turn)
+    if approach in ("rear_left", "rear_right"):  # from behind on the lane beside, passing close by
         return [_filtered(Situation("passes", "", partial(passes, at=at, side=side)), partial(_on_side, mut, sc, side))]
     if approach == "oncoming":
         if col == "lane_change" and at is not None:  # level just after the change (nearest an ego that moved left)

@@ -728,7 +728,7 @@ def _road_beside(mut: Mutator, sc: Scenario, side: str | None) -> list[tuple[flo
     return out
 
 
-#: [m] over the nearest another road's lane comes to the ego's on a ramp that a car there is placed to meet it
+#: [m] a car beside a ramp meets the ego where the road beside comes within this of its nearest to the ramp
 BESIDE_RAMP_SLACK_M = 0.5
 #: [m] before a ramp's end that a car beside it is level with the ego at the latest: the closest moment comes a little
 #: after that, and met at the very end it was on the road after the ramp (``rear_left|cruise``, not ``|merge``)
@@ -746,9 +746,9 @@ def beside_ramp(mut: Mutator, sc: Scenario, rng: random.Random, side: str, rear:
 
     ends = [s1 for _, s1 in _marks(mut, sc)["ramps"]]  # the encounter dated on the ramp, not just past its end
     spots = road_beside(mut, sc, side)
-    early = [s for s in spots if not any(e - BESIDE_RAMP_END_M < s[1] <= e for e in ends)]
     if not spots:
         return None
+    early = [s for s in spots if not any(e - BESIDE_RAMP_END_M < s[1] <= e for e in ends)]
     if early:  # the nearest of them
         nearest = min(g for g, *_ in early)
         gap, d, lane_id, t = rng.choice([s for s in early if s[0] <= nearest + BESIDE_RAMP_SLACK_M])
