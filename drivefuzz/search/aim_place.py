@@ -700,11 +700,10 @@ def road_beside(mut: Mutator, sc: Scenario, side: str | None) -> list[tuple[floa
 
 def _road_beside(mut: Mutator, sc: Scenario, side: str | None) -> list[tuple[float, float, str, float]]:
     from drivefuzz.search.aim import _marks
-    from drivefuzz.triage.coverage import BESIDE_M, SAME_LANE_M, _car_lanes, _heading_at, wrap_angle
+    from drivefuzz.triage.coverage import lanes_beside
     from shapely.geometry import Point
 
-    route = set(mut._route(sc))
-    ids, lines, tree = _car_lanes(mut.rmap)
+    route = {ln.getID() for e in mut._route(sc) for ln in mut.rmap.edge(e).getLanes()}  # the ego's own way
     out = []
     for s0, s1 in _marks(mut, sc)["ramps"]:
         for d in np.arange(max(s0, 0.0) + 1.0, s1 - 0.5, 2.0):
@@ -712,19 +711,8 @@ def _road_beside(mut: Mutator, sc: Scenario, side: str | None) -> list[tuple[flo
             if spot is None:
                 continue
             x, y, h = mut.rmap.geom(spot[1]).position(spot[2])
-            p = Point(x, y)
-            for i in tree.query(p, predicate="dwithin", distance=BESIDE_M):
-                if mut.rmap.lane(ids[i]).getEdge().getID() in route:  # the ego's own way
-                    continue
-                other = lines[i]
-                gap = other.distance(p)
-                t = other.project(p)
-                if gap < SAME_LANE_M or abs(wrap_angle(_heading_at(other, t) - h)) >= math.pi / 4:
-                    continue
-                c = other.interpolate(t)
-                on = "left" if math.cos(h) * (c.y - y) - math.sin(h) * (c.x - x) > 0 else "right"
-                if side in (None, on):
-                    out.append((round(gap, 2), float(d), ids[i], round(t, 2)))
+            out += [(round(gap, 2), float(d), lane, round(t, 2)) for lane, gap, t, on in
+                    lanes_beside(mut.rmap, Point(x, y), h, route) if side in (None, on)]
     return out
 
 

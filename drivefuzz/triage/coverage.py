@@ -43,7 +43,7 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 from shapely import STRtree
-from shapely.geometry import LineString
+from shapely.geometry import LineString, Point
 from shapely.ops import nearest_points
 
 from drivefuzz.search.episodes import GAP_M, PET_S, TTC_S  # the thresholds of a close encounter
@@ -636,25 +636,35 @@ def beside_sides(rmap, edge_id: str, last_m: float | None = None) -> frozenset[s
     own = {ln.getID() for ln in edge.getLanes()}  # and the lanes it continues from and into: the ego's own way
     own |= {c.getToLane().getID() for ln in edge.getLanes() for c in ln.getOutgoing()}
     own |= {c.getFromLane().getID() for e in edge.getIncoming() for c in e.getConnections(edge)}
-    ids, lines, tree = _car_lanes(rmap)
     out: set[str] = set()
     for way in mine:
-        near = [i for i in tree.query(way, predicate="dwithin", distance=BESIDE_M) if ids[i] not in own]
         for d in np.arange(0.0, way.length, 2.0):
-            p, h = way.interpolate(d), _heading_at(way, d + 0.5)
-            for i in near:
-                other = lines[i]
-                if not SAME_LANE_M <= other.distance(p) <= BESIDE_M:
-                    continue
-                t = other.project(p)
-                if abs(wrap_angle(_heading_at(other, t) - h)) >= math.pi / 4:
-                    continue
-                c = other.interpolate(t)
-                side = "left" if math.cos(h) * (c.y - p.y) - math.sin(h) * (c.x - p.x) > 0 else "right"
+            p = way.interpolate(d)
+            for *_, side in lanes_beside(rmap, p, _heading_at(way, d + 0.5), own):
                 out |= {f"vehicle/{side}", f"vehicle/rear_{side}"}
         if len(out) == 4:
             break
     return frozenset(out)
+
+
+def lanes_beside(rmap, p: Point, heading: float, own=frozenset()) -> list[tuple[str, float, float, str]]:
+    """(lane id, centre-line distance [m], position on that lane level with ``p`` [m], side) of every lane for cars
+    beside the point ``p`` of a way heading ``heading`` [rad]: within :data:`BESIDE_M`, further than a car beside in
+    the ego's own lane (:data:`SAME_LANE_M`), at under 45 degrees; not the lanes ``own``."""
+    ids, lines, tree = _car_lanes(rmap)
+    out = []
+    for i in tree.query(p, predicate="dwithin", distance=BESIDE_M):
+        other = lines[i]
+        gap = other.distance(p)
+        if ids[i] in own or gap < SAME_LANE_M:
+            continue
+        t = other.project(p)
+        if abs(wrap_angle(_heading_at(other, t) - heading)) >= math.pi / 4:
+            continue
+        c = other.interpolate(t)
+        side = "left" if math.cos(heading) * (c.y - p.y) - math.sin(heading) * (c.x - p.x) > 0 else "right"
+        out.append((ids[i], gap, t, side))
+    return out
 
 
 #: [m] back along another car's path from where it comes nearest the ego's: where it was 2 s before it met the ego
